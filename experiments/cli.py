@@ -1,0 +1,46 @@
+"""The ``osmobulge`` command line (typer).
+
+Commands are thin: they parse options, call library functions and write files.
+Each topic registers its commands from its own module (``_cli_*.py``).
+"""
+
+from __future__ import annotations
+
+import typer
+
+from osmobulge import __version__
+
+app = typer.Typer(
+    name="osmobulge",
+    help="Membrane permeability from time-lapse micrographs of osmotic microactuators.",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+)
+
+
+def _version_callback(value: bool):
+    if value:
+        typer.echo(f"osmobulge {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _root(
+    version: bool = typer.Option(
+        False, "--version", callback=_version_callback, is_eager=True, help="Print the version and exit."
+    ),
+):
+    """osmobulge: membrane bulge mechanics, flux model, fits, image pipeline and reports."""
+
+
+# topic modules register their commands on ``app`` when imported
+from osmobulge.experiments import _cli_modeling  # noqa: E402,F401
+
+
+def main() -> None:  # entry point of the console script
+    app()
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,406 @@
+r"""Axisymmetric hyperelastic membrane bulge: profiles and mechanics functions.
+
+Public entry points (main text Sec. 3.3-3.5, supplement Secs 4-5):
+
+* :func:`bulge_profile` -- the deformed membrane at one dimensionless bulge volume
+  :math:`\tilde V = \Delta V/(\pi a^3)`;
+* :func:`bulge_mechanics` -- :math:`f_A, f_l`, the pressure and related functions
+  over many :math:`\tilde V`;
+* :func:`locking_volume` -- the largest :math:`\tilde V` a locking (Gent) law reaches;
+* :func:`turgor_ratio` -- :math:`f_p = P_t/E` for a chamber's :math:`l_0/a`.
+
+All lengths are in units of the chamber radius :math:`a`, the pressure in units of
+:math:`C l_0/a` where :math:`C` is ``material.stress_scale`` (:math:`C_1`).
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+
+import numpy as np
+import xarray as xr
+from scipy.interpolate import CubicHermiteSpline
+
+from osmobulge import __version__
+from osmobulge.modeling import _shooting
+from osmobulge.modeling.linear import linear_area_ratio, linear_pressure
+from osmobulge.modeling.materials import LinearElastic, Material
+from osmobulge.modeling.prestretch import check_prestretch
+
+__all__ = [
+    "bulge_profile",
+    "bulge_mechanics",
+    "locking_volume",
+    "turgor_ratio",
+    "NoSolutionError",
+    "MECHANICS_ATTRS",
+]
+
+
+class NoSolutionError(ValueError):
+    """The bulge problem has no solution for the requested input."""
+
+
+MECHANICS_ATTRS = {
+    "area_ratio": {"units": "1", "long_name": "membrane area ratio f_A = A/A0"},
+    "inverse_thickness": {"units": "1", "long_name": "mean inverse thickness ratio f_l = <l0/l>"},
+    "pressure": {"units": "1", "long_name": "dimensionless turgor pressure P_t a/(C1 l0)"},
+    "lambda_bar": {"units": "1", "long_name": "average biaxial stretch sqrt(A/A0)"},
+    "mean_stretch": {"units": "1", "long_name": "area-averaged biaxial stretch <sqrt(lam_xi lam_phi)> (supp. Eqn 55)"},
+    "pole_thickness_ratio": {"units": "1", "long_name": "pole thickness ratio l_pole/l0"},
+    "pole_stretch": {"units": "1", "long_name": "equibiaxial stretch at the pole"},
+    "bulge_height": {"units": "1", "long_name": "dome height over the rim plane delta/a"},
+    "lambda_pre": {"units": "1", "long_name": "rim pre-stretch lambda_pre"},
+}
+
+
+def _material_attrs(material) -> dict:
+    attrs = {"material_law": material.law, "stress_scale_Pa": float(material.stress_scale)}
+    for k, v in material.constants.items():
+        attrs[f"material_{k}"] = float(v)
+    attrs["nondimensionalising_modulus_Pa"] = float(material.E)
+    attrs["osmobulge_version"] = __version__
+    return attrs
+
+
+def _check_material(material):
+    if not isinstance(material, Material | LinearElastic):
+        raise TypeError(
+            "material must be an osmobulge.modeling.materials law (e.g. materials.PDMS), "
+            f"got {type(material).__name__}"
+        )
+
+
+def _check_vtilde(vtilde, *, sorted_=False, name="vtilde"):
+    v = np.atleast_1d(np.asarray(vtilde, dtype=float))
+    if v.ndim != 1:
+        raise ValueError(f"{name} must be a scalar or 1-D array, got shape {v.shape}")
+    if not np.all(np.isfinite(v)):
+        raise ValueError(f"{name} must be finite")
+    if np.any(v < 0):
+        raise ValueError(
+            f"{name} must be >= 0 (bulge volume over pi a^3), got min {v.min():.6g}; "
+            "an inward bulge is the mirror image of an outward one"
+        )
+    if sorted_ and np.any(np.diff(v) <= 0):
+        raise ValueError(f"{name} must be strictly increasing")
+    return v
+
+
+def locking_volume(material, lambda_pre=1.0) -> float:
+    r"""Largest dimensionless bulge volume :math:`\tilde V` the law can reach.
+
+    For a Gent-type law the pole stretch approaches the equibiaxial locking
+    stretch and the pressure diverges at a finite :math:`\tilde V`; for laws
+    that never lock the result is ``inf``.
+
+    Parameters
+    ----------
+    material : Material
+        Constitutive law.
+    lambda_pre : float
+        Constant rim pre-stretch (>= 1).
+
+    Returns
+    -------
+    float
+        :math:`\tilde V_{lock}`.
+
+    Examples
+    --------
+    >>> from osmobulge.modeling.materials import PDMS
+    >>> round(locking_volume(PDMS), 2)
+    7.21
+    """
+    _check_material(material)
+    if isinstance(material, LinearElastic):
+        return math.inf
+    ell = float(check_prestretch(lambda_pre, 0.0))
+    return _shooting.locking_volume(material, ell)
+
+
+@functools.lru_cache(maxsize=256)
+def _lock_volume_cached(material, ell: float) -> float:
+    return float(_lock_volumes_uncached(material, np.array([ell]))[0])
+
+
+def _lock_volumes(material, ell):
+    """Locking volume for each rim stretch in ``ell``, memoised per (law, value)."""
+    lam_lock = material.locking_stretch
+    if not math.isfinite(lam_lock):
+        return np.full(ell.shape, np.inf), np.full(ell.shape, np.inf)
+    levels, inverse = np.unique(ell, return_inverse=True)
+    if levels.size <= 4:
+        vlock = np.array([_lock_volume_cached(material, float(lv)) for lv in levels])
+    else:
+        vlock = _lock_volumes_uncached(material, levels)
+    return vlock[inverse], np.full(ell.shape, lam_lock)
+
+
+def _lock_volumes_uncached(material, levels):
+    lam_lock = material.locking_stretch
+    eps1, eps2 = 1e-4, 1e-5
+    m = levels.size
+    res = _shooting.family(
+        material,
+        np.r_[np.full(m, lam_lock * (1 - eps1)), np.full(m, lam_lock * (1 - eps2))],
+        np.r_[levels, levels],
+    )
+    v1, v2 = res["vtilde"][:m], res["vtilde"][m:]
+    return v2 + (v2 - v1) * eps2 / (eps1 - eps2)
+
+
+#: pole-stretch samples of the coarse families, as fractions of the reachable range
+_FAMILY_U = np.unique(np.r_[np.geomspace(1e-9, 0.5, 28), 1.0 - np.geomspace(0.5, 1e-5, 24)])
+
+
+def _row_curves(material, ell, lam_top):
+    """Coarse exact families at up to three rim stretches, interpolated to every row."""
+    levels = np.unique(np.round(np.r_[ell.min(), np.median(ell), ell.max()], 12))
+    top = float(np.min(lam_top))
+    lam0 = np.concatenate([lv + _FAMILY_U * (top - lv) for lv in levels])
+    ells = np.repeat(levels, _FAMILY_U.size)
+    fam = _shooting.family(material, lam0, ells, steps=80)
+    qs, lnvs, lnps = [], [], []
+    for i, lv in enumerate(levels):
+        sl = slice(i * _FAMILY_U.size, (i + 1) * _FAMILY_U.size)
+        v, p, l0 = fam["vtilde"][sl], fam["pressure"][sl], lam0[sl]
+        ok = np.isfinite(v) & (v > 0) & np.isfinite(p)
+        if ok.sum() < 4:
+            raise NoSolutionError(f"the {material.law} law gives no bulge solutions at lambda_pre={lv:.6g}")
+        qs.append(np.log(l0[ok] - lv))
+        lnvs.append(np.log(v[ok]))
+        lnps.append(np.log(p[ok]))
+    m = min(len(q) for q in qs)
+    qs, lnvs, lnps = (np.array([a[:m] for a in arrs]) for arrs in (qs, lnvs, lnps))
+    if levels.size == 1:
+        w = np.zeros((ell.size, 1))
+        idx = np.zeros(ell.size, int)
+        pick = lambda arr: arr[idx]  # noqa: E731
+    else:
+        j = np.clip(np.searchsorted(levels, ell) - 1, 0, levels.size - 2)
+        w = ((ell - levels[j]) / (levels[j + 1] - levels[j]))[:, None]
+        pick = lambda arr: arr[j] * (1 - w) + arr[j + 1] * w  # noqa: E731
+    return _shooting.RowCurves(pick(qs), pick(lnvs), pick(lnps))
+
+
+def _solve(material, vt, ell):
+    """Solve for every positive target volume; return the scaled result dict."""
+    vlock, lam_lock = _lock_volumes(material, ell)
+    too_big = vt >= vlock
+    if np.any(too_big):
+        i = int(np.argmax(too_big))
+        raise NoSolutionError(
+            f"vtilde={vt[i]:.6g} is beyond the largest volume the {material.law} law reaches "
+            f"(locking limit vtilde_lock={vlock[i]:.6g} at lambda_pre={ell[i]:.6g}); "
+            "the pressure diverges there"
+        )
+    lam_top = np.where(np.isfinite(lam_lock), lam_lock * (1 - 1e-7), 50.0 * ell)
+    curves = _row_curves(material, ell, lam_top)
+    res = _shooting.solve_volumes(material, vt, ell, curves=curves, lam0_max=lam_top)
+    if not np.all(res["converged"]):
+        i = int(np.argmin(res["converged"]))
+        raise NoSolutionError(
+            f"no clamped bulge solution found for vtilde={vt[i]:.6g} at lambda_pre={ell[i]:.6g} "
+            f"with the {material.law} law (shooting did not converge)"
+        )
+    return res
+
+
+def bulge_mechanics(material, vtilde, lambda_pre=1.0) -> xr.Dataset:
+    r"""Mechanics functions of the bulging membrane over dimensionless volumes.
+
+    Parameters
+    ----------
+    material : Material or LinearElastic
+        Constitutive law, e.g. ``materials.PDMS``; ``LinearElastic`` gives the
+        closed forms of Eqns 11-13 (corrected).
+    vtilde : array_like of shape (N,)
+        Strictly increasing dimensionless bulge volumes
+        :math:`\tilde V = \Delta V / (\pi a^3) \geq 0`.
+    lambda_pre : float or callable
+        Rim pre-stretch :math:`\lambda_{pre} \geq 1`, constant or a function of
+        :math:`\tilde V` (e.g. :class:`~osmobulge.modeling.prestretch.PreStretch`).
+
+    Returns
+    -------
+    xarray.Dataset
+        Over ``vtilde``: ``area_ratio`` (:math:`f_A`), ``inverse_thickness``
+        (:math:`f_l`), ``pressure`` (:math:`P_t a/(C_1 l_0)`), ``lambda_bar``
+        (:math:`\sqrt{A/A_0}`), ``mean_stretch``, ``pole_thickness_ratio``,
+        ``pole_stretch``, ``bulge_height`` (:math:`\delta/a`), ``lambda_pre``.
+
+    Raises
+    ------
+    NoSolutionError
+        For a volume at or beyond the law's locking limit (the message gives it).
+
+    Notes
+    -----
+    Solves main text Eqns 19-24 with Eqn 23 corrected (disc radius squared) and
+    the invariants of Eqns 15-16 corrected; see ``docs/paper-errata.md``.
+
+    Examples
+    --------
+    >>> from osmobulge.modeling.materials import PDMS
+    >>> ds = bulge_mechanics(PDMS, [0.5, 1.0, 2.0])
+    >>> ds.area_ratio.values.round(3)
+    array([1.589, 2.69 , 4.818])
+    """
+    _check_material(material)
+    vt = _check_vtilde(vtilde, sorted_=True)
+    ell = check_prestretch(lambda_pre, vt)
+    n = vt.size
+    out = {k: np.empty(n) for k in MECHANICS_ATTRS}
+    out["lambda_pre"] = ell.copy()
+    if isinstance(material, LinearElastic):
+        out["area_ratio"] = linear_area_ratio(vt) * ell**2
+        out["inverse_thickness"] = ell**2
+        # P a / (C1 l0) with C1 = E/6
+        out["pressure"] = 6.0 * linear_pressure(vt)
+        out["mean_stretch"] = np.sqrt(out["area_ratio"])
+        out["pole_stretch"] = np.full(n, np.nan)
+        out["pole_thickness_ratio"] = np.full(n, np.nan)
+        out["bulge_height"] = 2.0 * vt
+    else:
+        flat = vt == 0
+        for k in ("area_ratio", "inverse_thickness"):
+            out[k][flat] = ell[flat] ** 2
+        out["pressure"][flat] = 0.0
+        out["mean_stretch"][flat] = ell[flat]
+        out["pole_stretch"][flat] = ell[flat]
+        out["pole_thickness_ratio"][flat] = ell[flat] ** -2
+        out["bulge_height"][flat] = 0.0
+        if np.any(~flat):
+            res = _solve(material, vt[~flat], ell[~flat])
+            out["area_ratio"][~flat] = res["area_ratio"]
+            out["inverse_thickness"][~flat] = res["inverse_thickness"]
+            out["pressure"][~flat] = res["pressure"]
+            out["mean_stretch"][~flat] = res["mean_stretch"]
+            out["pole_stretch"][~flat] = res["lam0"]
+            out["pole_thickness_ratio"][~flat] = res["lam0"] ** -2
+            out["bulge_height"][~flat] = res["height"]
+    out["lambda_bar"] = np.sqrt(out["area_ratio"])
+    ds = xr.Dataset(
+        {k: ("vtilde", v, dict(MECHANICS_ATTRS[k])) for k, v in out.items()},
+        coords={"vtilde": ("vtilde", vt, {"units": "1", "long_name": "dimensionless bulge volume dV/(pi a^3)"})},
+        attrs=_material_attrs(material)
+        | {"lambda_pre": _prestretch_label(lambda_pre), "title": "membrane bulge mechanics"},
+    )
+    return ds
+
+
+def _prestretch_label(lambda_pre) -> str:
+    if callable(lambda_pre):
+        return getattr(lambda_pre, "cache_key", repr(lambda_pre))
+    return repr(float(lambda_pre))
+
+
+def bulge_profile(material, vtilde, lambda_pre=1.0, *, n=201) -> xr.Dataset:
+    r"""Deformed membrane profile at one dimensionless bulge volume.
+
+    Parameters
+    ----------
+    material : Material
+        Hyperelastic law (``LinearElastic`` has no profile; use a law).
+    vtilde : float
+        :math:`\tilde V = \Delta V/(\pi a^3) > 0`.
+    lambda_pre : float or callable
+        Rim pre-stretch (>= 1), constant or a function of :math:`\tilde V`.
+    n : int
+        Number of reference radii ``rho`` in [0, 1].
+
+    Returns
+    -------
+    xarray.Dataset
+        Over ``rho`` (reference radius / a): ``r`` (r/a), ``z`` (z/a, height
+        above the rim plane, positive into the dome), ``lambda_xi``,
+        ``lambda_phi``, ``thickness_ratio`` (l/l0), ``alpha`` (tangent angle of
+        the paper's Fig. 3a, rad; > pi/2 where the dome overhangs its rim).
+        attrs: ``pressure`` (:math:`P_t a/(C_1 l_0)`), ``vtilde``, ``lambda_pre``,
+        ``area_ratio``, ``inverse_thickness``, ``bulge_height``, ``pole_stretch``.
+
+    Examples
+    --------
+    >>> from osmobulge.modeling.materials import PDMS
+    >>> p = bulge_profile(PDMS, 2/3)
+    >>> float(p.z[0]) > float(p.r[-1]) * 0.9   # about a hemisphere
+    True
+    """
+    _check_material(material)
+    if isinstance(material, LinearElastic):
+        raise TypeError("bulge_profile needs a hyperelastic law; LinearElastic has only closed-form f_A, f_l, f_p")
+    v = _check_vtilde(vtilde)
+    if v.size != 1 or v[0] <= 0:
+        raise ValueError(f"vtilde must be a single positive number, got {vtilde!r}")
+    if int(n) < 3:
+        raise ValueError(f"n must be >= 3, got {n!r}")
+    ell = check_prestretch(lambda_pre, v)
+    res = _solve(material, v, ell)
+    lam0, p = res["lam0"], res["pressure"]
+    shot = _shooting.shoot(material, lam0, ell, p, keep_path=True, rho_max=1.05)
+    rs = shot["rho_star"][0]
+    if not np.isfinite(rs):
+        raise NoSolutionError(f"final profile integration failed at vtilde={v[0]:.6g}")
+    mesh, path = shot["rho"], shot["path"][:, :, 0]
+    deriv = _shooting.rhs(material, mesh[None, :] * 0 + mesh, path, p[0])
+    rho = np.linspace(0.0, 1.0, int(n))
+    rho_ref = rho * rs  # coordinates of the shot
+    ys = np.empty((_shooting.N_STATE, rho.size))
+    inside = rho_ref >= mesh[0]
+    for i in range(_shooting.N_STATE):
+        spline = CubicHermiteSpline(mesh, path[i], deriv[i])
+        ys[i, inside] = spline(rho_ref[inside])
+    if np.any(~inside):
+        ys[:, ~inside] = _shooting.pole_series(material, lam0, p, rho_ref[~inside])[:, 0, :] if False else \
+            _shooting.pole_series(material, np.full((~inside).sum(), lam0[0]), np.full((~inside).sum(), p[0]),
+                                  rho_ref[~inside])
+    y_end = shot["y_star"][:, 0]
+    lxi, al, lphi = ys[_shooting.IXI], ys[_shooting.IAL], ys[_shooting.IPHI]
+    r = lphi * rho
+    z = (y_end[_shooting.IZ] - ys[_shooting.IZ]) / rs
+    dims = ("rho",)
+    ds = xr.Dataset(
+        {
+            "r": (dims, r, {"units": "1", "long_name": "radial position r/a"}),
+            "z": (dims, z, {"units": "1", "long_name": "height above the rim plane z/a"}),
+            "lambda_xi": (dims, lxi, {"units": "1", "long_name": "meridional stretch"}),
+            "lambda_phi": (dims, lphi, {"units": "1", "long_name": "hoop stretch"}),
+            "thickness_ratio": (dims, 1.0 / (lxi * lphi), {"units": "1", "long_name": "thickness ratio l/l0"}),
+            "alpha": (dims, al, {"units": "rad", "long_name": "meridian tangent angle"}),
+        },
+        coords={"rho": (dims, rho, {"units": "1", "long_name": "reference radius rho/a"})},
+        attrs=_material_attrs(material)
+        | {
+            "vtilde": float(v[0]),
+            "lambda_pre": float(ell[0]),
+            "pressure": float(p[0]),
+            "area_ratio": float(res["area_ratio"][0]),
+            "inverse_thickness": float(res["inverse_thickness"][0]),
+            "bulge_height": float(res["height"][0]),
+            "pole_stretch": float(lam0[0]),
+            "title": "membrane bulge profile",
+        },
+    )
+    return ds
+
+
+def turgor_ratio(pressure, material, thickness_over_radius):
+    r"""Convert the dimensionless pressure to :math:`f_p = P_t / E` for a chamber.
+
+    :math:`f_p = \tilde P\, C_1 (l_0/a) / E`, with ``material.E`` the
+    nondimensionalising modulus (the paper's E for the presets).
+
+    Parameters
+    ----------
+    pressure : array_like
+        :math:`P_t a/(C_1 l_0)` from :func:`bulge_mechanics`.
+    material : Material or LinearElastic
+    thickness_over_radius : float
+        :math:`l_0/a` of the chamber.
+    """
+    r = float(thickness_over_radius)
+    if not math.isfinite(r) or r <= 0:
+        raise ValueError(f"thickness_over_radius (l0/a) must be finite and > 0, got {thickness_over_radius!r}")
+    return np.asarray(pressure, float) * material.stress_scale * r / material.E
