@@ -6,8 +6,10 @@ Each topic registers its commands from its own module (``_cli_*.py``).
 
 from __future__ import annotations
 
-import typer
+import importlib
+import importlib.util
 
+import typer
 from osmobulge import __version__
 
 app = typer.Typer(
@@ -34,8 +36,12 @@ def _root(
     """osmobulge: membrane bulge mechanics, flux model, fits, image pipeline and reports."""
 
 
-# topic modules register their commands on ``app`` when imported
-from osmobulge.experiments import _cli_modeling  # noqa: E402,F401
+# Topic modules register their commands on ``app`` when imported.  A module
+# that does not exist (yet) is skipped; one that exists but fails to import raises.
+_TOPICS = ("_cli_modeling", "_cli_transport", "_cli_imaging", "_cli_runs", "_cli_plugins")
+for _topic in _TOPICS:
+    if importlib.util.find_spec(f"osmobulge.experiments.{_topic}") is not None:
+        importlib.import_module(f"osmobulge.experiments.{_topic}")
 
 
 def main() -> None:  # entry point of the console script

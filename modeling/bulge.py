@@ -20,13 +20,12 @@ import math
 
 import numpy as np
 import xarray as xr
-from scipy.interpolate import CubicHermiteSpline
-
 from osmobulge import __version__
 from osmobulge.modeling import _shooting
 from osmobulge.modeling.linear import linear_area_ratio, linear_pressure
 from osmobulge.modeling.materials import LinearElastic, Material
 from osmobulge.modeling.prestretch import check_prestretch
+from scipy.interpolate import CubicHermiteSpline
 
 __all__ = [
     "bulge_profile",
@@ -344,18 +343,16 @@ def bulge_profile(material, vtilde, lambda_pre=1.0, *, n=201) -> xr.Dataset:
     if not np.isfinite(rs):
         raise NoSolutionError(f"final profile integration failed at vtilde={v[0]:.6g}")
     mesh, path = shot["rho"], shot["path"][:, :, 0]
-    deriv = _shooting.rhs(material, mesh[None, :] * 0 + mesh, path, p[0])
+    deriv = _shooting.rhs(material, mesh, path, p[0])
     rho = np.linspace(0.0, 1.0, int(n))
     rho_ref = rho * rs  # coordinates of the shot
     ys = np.empty((_shooting.N_STATE, rho.size))
     inside = rho_ref >= mesh[0]
     for i in range(_shooting.N_STATE):
-        spline = CubicHermiteSpline(mesh, path[i], deriv[i])
-        ys[i, inside] = spline(rho_ref[inside])
-    if np.any(~inside):
-        ys[:, ~inside] = _shooting.pole_series(material, lam0, p, rho_ref[~inside])[:, 0, :] if False else \
-            _shooting.pole_series(material, np.full((~inside).sum(), lam0[0]), np.full((~inside).sum(), p[0]),
-                                  rho_ref[~inside])
+        ys[i, inside] = CubicHermiteSpline(mesh, path[i], deriv[i])(rho_ref[inside])
+    if np.any(~inside):  # within RHO_START of the pole: the series is exact to rounding
+        m = int((~inside).sum())
+        ys[:, ~inside] = _shooting.pole_series(material, np.full(m, lam0[0]), np.full(m, p[0]), rho_ref[~inside])
     y_end = shot["y_star"][:, 0]
     lxi, al, lphi = ys[_shooting.IXI], ys[_shooting.IAL], ys[_shooting.IPHI]
     r = lphi * rho

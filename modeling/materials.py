@@ -49,7 +49,7 @@ def _check_constant(name: str, value: float, *, allow_zero: bool = False) -> flo
     try:
         value = float(value)
     except (TypeError, ValueError):
-        raise TypeError(f"material constant {name!r} must be a real number, got {value!r}")
+        raise TypeError(f"material constant {name!r} must be a real number, got {value!r}") from None
     if not math.isfinite(value):
         raise ValueError(f"material constant {name!r} must be finite, got {value!r}")
     if value < 0 or (value == 0 and not allow_zero):
@@ -323,7 +323,7 @@ def _check_jm(jm: float) -> float:
     try:
         jm = float(jm)
     except (TypeError, ValueError):
-        raise TypeError(f"material constant 'jm' must be a real number, got {jm!r}")
+        raise TypeError(f"material constant 'jm' must be a real number, got {jm!r}") from None
     if not math.isfinite(jm) or jm <= 0:
         raise ValueError(f"material constant 'jm' (locking limit of I1 - 3) must be finite and > 0, got {jm!r}")
     return jm

@@ -98,7 +98,7 @@ def check_prestretch(lambda_pre, vtilde):
         try:
             ell = np.asarray(float(lambda_pre))
         except (TypeError, ValueError):
-            raise TypeError(f"lambda_pre must be a number >= 1 or a callable of vtilde, got {lambda_pre!r}")
+            raise TypeError(f"lambda_pre must be a number >= 1 or a callable of vtilde, got {lambda_pre!r}") from None
         what = "lambda_pre"
     ell = np.broadcast_to(ell, v.shape).astype(float)
     if not np.all(np.isfinite(ell)):

@@ -14,6 +14,7 @@ The cache is the only file I/O in :mod:`osmobulge.modeling`; writes are atomic.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import math
@@ -23,11 +24,10 @@ from pathlib import Path
 
 import numpy as np
 import xarray as xr
-from scipy.interpolate import CubicSpline
-
 from osmobulge import __version__
 from osmobulge.modeling.bulge import MECHANICS_ATTRS, _check_material, bulge_mechanics, locking_volume
 from osmobulge.modeling.materials import LinearElastic
+from scipy.interpolate import CubicSpline
 
 __all__ = ["MechanicsTable", "mechanics_table", "cache_dir", "TABLE_SCHEMA"]
 
@@ -217,6 +217,7 @@ def mechanics_table(material, lambda_pre=1.0, *, vtilde_max=None, n=160, cache=T
 
 
 def _atomic_save(path: Path, grid, data, vlock) -> None:
+    tmp = None
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".tmp-", suffix=".npz")
@@ -225,7 +226,6 @@ def _atomic_save(path: Path, grid, data, vlock) -> None:
         os.replace(tmp, path)
     except OSError:
         # a read-only cache directory must not break the computation
-        try:
-            os.unlink(tmp)
-        except (OSError, UnboundLocalError):
-            pass
+        if tmp is not None:
+            with contextlib.suppress(OSError):
+                os.unlink(tmp)
