@@ -54,7 +54,7 @@ def test_qt_only_in_plugins():
     for package in ["modeling", "imaging", "experiments"]:
         for path in (ROOT / package).rglob("*.py"):
             for name in _imports(path):
-                assert not name.split(".")[0] in {"qtpy", "PyQt5", "PyQt6", "PySide6", "napari"}, path
+                assert name.split(".")[0] not in {"qtpy", "PyQt5", "PyQt6", "PySide6", "napari"}, path
 
 
 def test_cli_version():
