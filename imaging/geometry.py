@@ -1,0 +1,481 @@
+r"""Geometry of traced bulge profiles: ellipse fits, smoothing splines, solids of revolution.
+
+Pure numerics (numpy, scipy, scikit-image), no I/O.  Coordinates are in any
+length unit (pixels or metres); the results carry the same unit.
+
+A traced dome is an open curve from one rim to the other.  About the chamber
+axis each half describes a solid of revolution; for a dome beyond the
+hemisphere (:math:`\tilde V > 2/3`) the curve overhangs the rim, so it is a
+curve :math:`(r(s), z(s))` and not a function :math:`z(r)`.  Its volume above
+the rim plane and its area follow from line integrals along the curve
+(Green's theorem), valid for any simple curve from the axis to the rim plane:
+
+.. math::
+
+    V = -\int \pi r^2 \, dz, \qquad A = 2\pi \int r \, ds .
+
+Both are exact for a polyline (frustum formulas), so a densely sampled
+smoothing spline converges as :math:`O(h^2)`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import interpolate
+from skimage import measure
+
+__all__ = [
+    "EllipseFit",
+    "fit_ellipse",
+    "ProfileSpline",
+    "smooth_profile",
+    "split_halves",
+    "revolution_volume",
+    "revolution_area",
+    "RevolutionMeasures",
+    "revolution_measures",
+    "to_chamber_frame",
+]
+
+
+# --------------------------------------------------------------------------- ellipse
+@dataclass(frozen=True)
+class EllipseFit:
+    """Result of :func:`fit_ellipse` (falsy when the fit failed).
+
+    Attributes
+    ----------
+    center : tuple of float
+        Centre ``(x, y)`` (units of the points).
+    semi_axes : tuple of float
+        Semi-axes ``(a, b)`` along the rotated x and y axes (units of the points).
+    angle : float, rad
+        Rotation of the ``a`` axis from the x axis (counter-clockwise for y up).
+    residuals : ndarray of shape (N,)
+        Geometric distance of each input point from the ellipse (nan when failed).
+    inliers : ndarray of bool, shape (N,)
+        Points used by the final fit (all of them unless ``robust``).
+    rms : float
+        Root-mean-square residual of the inliers.
+    message : str
+        Empty on success, else why the fit failed.
+    """
+
+    center: tuple = (np.nan, np.nan)
+    semi_axes: tuple = (np.nan, np.nan)
+    angle: float = np.nan
+    residuals: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    inliers: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
+    rms: float = np.nan
+    message: str = ""
+
+    def __bool__(self) -> bool:
+        return not self.message
+
+    def points(self, t) -> np.ndarray:
+        """Points on the ellipse at parameter angles ``t`` (rad), shape (len(t), 2)."""
+        t = np.asarray(t, float)
+        (xc, yc), (a, b), th = self.center, self.semi_axes, self.angle
+        ct, st = np.cos(th), np.sin(th)
+        x = xc + a * np.cos(t) * ct - b * np.sin(t) * st
+        y = yc + a * np.cos(t) * st + b * np.sin(t) * ct
+        return np.stack([x, y], axis=-1)
+
+
+def fit_ellipse(points, *, robust=False, residual_threshold=None, max_trials=200, seed=0) -> EllipseFit:
+    """Least-squares ellipse (general conic) through 2-D points, as the paper's profile fit.
+
+    Parameters
+    ----------
+    points : array_like of shape (N, 2)
+        ``(x, y)`` coordinates, N >= 5, any length unit.
+    robust : bool
+        Use RANSAC (:func:`skimage.measure.ransac`) to reject outliers before the
+        final least-squares fit on the inliers.
+    residual_threshold : float, optional
+        RANSAC inlier distance (units of the points); default 3 x the median
+        absolute residual of the plain fit (at least 1e-9 x the point spread).
+    max_trials : int
+        RANSAC trials.
+    seed : int
+        Seed of the RANSAC sampler.
+
+    Returns
+    -------
+    EllipseFit
+        Centre, semi-axes, angle, geometric residuals, inliers and RMS; falsy
+        (with ``message``) when no ellipse fits (e.g. collinear points).
+
+    Notes
+    -----
+    Main text Sec. 2.3: "Custom MATLAB code fits an elliptical curve to each
+    membrane deformation profile".  The fit minimises geometric distances
+    (:class:`skimage.measure.EllipseModel`).
+
+    Examples
+    --------
+    >>> t = np.linspace(0, np.pi, 40)
+    >>> fit = fit_ellipse(np.c_[2 * np.cos(t), 1 + np.sin(t)])
+    >>> [round(v, 6) + 0.0 for v in (*fit.center, *sorted(fit.semi_axes))]
+    [0.0, 1.0, 1.0, 2.0]
+    """
+    pts = np.asarray(points, float)
+    if pts.ndim != 2 or pts.shape[1] != 2:
+        raise ValueError(f"points must have shape (N, 2), got {pts.shape}")
+    pts = pts[np.all(np.isfinite(pts), axis=1)]
+    n = len(pts)
+    if n < 5:
+        return EllipseFit(message=f"need at least 5 finite points for an ellipse, got {n}")
+    model = measure.EllipseModel.from_estimate(pts)
+    if not model:
+        return EllipseFit(message=f"ellipse fit failed: {model}")
+    inl = np.ones(n, bool)
+    if robust:
+        if residual_threshold is not None and residual_threshold <= 0:
+            raise ValueError(f"residual_threshold must be > 0, got {residual_threshold!r}")
+        floor = 1e-9 * float(np.ptp(pts, axis=0).max())
+        res = np.abs(model.residuals(pts))
+        # RANSAC, then refit on the inliers; without a given threshold shrink it to
+        # 3 robust sigmas of the current inliers until the inlier set is stable
+        for _ in range(1 if residual_threshold is not None else 6):
+            thr = residual_threshold or max(3.0 * 1.4826 * float(np.median(res[inl])), floor)
+            rmodel, rinl = measure.ransac(
+                pts, measure.EllipseModel, min_samples=5, residual_threshold=thr, max_trials=max_trials, rng=seed
+            )
+            if rmodel is None or rinl is None or rinl.sum() < 5:
+                break
+            refit = measure.EllipseModel.from_estimate(pts[rinl])
+            if not refit:
+                break
+            res = np.abs(refit.residuals(pts))
+            new = res <= thr
+            if new.sum() < 5:
+                break
+            model, stable, inl = refit, np.array_equal(new, inl), new
+            if stable:
+                break
+    res = np.abs(model.residuals(pts))
+    a, b = (float(v) for v in model.axis_lengths)
+    if not (np.isfinite(a) and np.isfinite(b) and a > 0 and b > 0):
+        return EllipseFit(message="ellipse fit gave a degenerate conic")
+    return EllipseFit(
+        center=tuple(float(c) for c in model.center),
+        semi_axes=(a, b),
+        angle=float(model.theta),
+        residuals=res,
+        inliers=inl,
+        rms=float(np.sqrt(np.mean(res[inl] ** 2))),
+    )
+
+
+# --------------------------------------------------------------------------- spline
+@dataclass(frozen=True)
+class ProfileSpline:
+    """Smoothing-spline description of an open profile curve, parameterised by arc length.
+
+    Attributes
+    ----------
+    spline : scipy.interpolate.BSpline
+        Parametric spline of ``(x, y)`` over the normalised parameter ``u`` in [0, 1].
+    length : float
+        Arc length of the curve (units of the points).
+    residuals : ndarray of shape (N,)
+        Distance of each input point from its spline point (units of the points).
+    """
+
+    spline: interpolate.BSpline
+    length: float
+    residuals: np.ndarray
+    _u_of_s: interpolate.PchipInterpolator = field(repr=False)
+
+    def __call__(self, s) -> np.ndarray:
+        """Points ``(x, y)`` at arc length(s) ``s`` from the first end, shape (..., 2)."""
+        s = np.clip(np.asarray(s, float), 0.0, self.length)
+        return np.moveaxis(np.asarray(self.spline(self._u_of_s(s))), 0, -1)
+
+    def tangent(self, s) -> np.ndarray:
+        """Unit tangent vectors at arc length(s) ``s``, shape (..., 2)."""
+        s = np.clip(np.asarray(s, float), 0.0, self.length)
+        d = np.moveaxis(np.asarray(self.spline.derivative()(self._u_of_s(s))), 0, -1)
+        return d / np.linalg.norm(d, axis=-1, keepdims=True)
+
+    def sample(self, step=None, n=None) -> tuple[np.ndarray, np.ndarray]:
+        """Arc lengths and points on an even grid (``step`` spacing or ``n`` points)."""
+        if n is None:
+            step = 1.0 if step is None else float(step)
+            n = max(int(np.ceil(self.length / step)) + 1, 2)
+        s = np.linspace(0.0, self.length, int(n))
+        return s, self(s)
+
+    @property
+    def rms(self) -> float:
+        """RMS distance of the input points from the spline."""
+        return float(np.sqrt(np.mean(self.residuals**2))) if self.residuals.size else np.nan
+
+
+def _arc_length_table(spl, n=4001):
+    u = np.linspace(0.0, 1.0, n)
+    d = np.asarray(spl.derivative()(u))
+    speed = np.hypot(d[0], d[1])
+    s = np.concatenate([[0.0], np.cumsum(0.5 * (speed[1:] + speed[:-1]) * np.diff(u))])
+    return u, s
+
+
+def smooth_profile(points, *, sigma=None, smoothing=None, weights=None) -> ProfileSpline:
+    """Cubic smoothing spline through an ordered open curve, re-parameterised by arc length.
+
+    Parameters
+    ----------
+    points : array_like of shape (N, 2)
+        Ordered ``(x, y)`` points along the curve, N >= 4.
+    sigma : float, optional
+        Expected scatter of the points normal to the curve (units of the points);
+        sets the smoothing to ``N * sigma**2`` (the spline then passes within
+        about ``sigma`` of the points).  Default: interpolate (``smoothing=0``).
+    smoothing : float, optional
+        Explicit smoothing factor ``s`` of :func:`scipy.interpolate.make_splprep`
+        (overrides ``sigma``).
+    weights : array_like of shape (N,), optional
+        Point weights (e.g. 0 for rejected outliers).
+
+    Returns
+    -------
+    ProfileSpline
+        Callable on arc length ``s`` in [0, length].
+
+    Examples
+    --------
+    >>> t = np.linspace(0, np.pi, 50)
+    >>> spl = smooth_profile(np.c_[np.cos(t), np.sin(t)])
+    >>> round(spl.length, 4)  # half circle
+    3.1416
+    """
+    pts = np.asarray(points, float)
+    if pts.ndim != 2 or pts.shape[1] != 2:
+        raise ValueError(f"points must have shape (N, 2), got {pts.shape}")
+    ok = np.all(np.isfinite(pts), axis=1)
+    w = None if weights is None else np.asarray(weights, float)
+    if w is not None:
+        if w.shape != (len(pts),):
+            raise ValueError(f"weights must have shape ({len(pts)},), got {w.shape}")
+        ok &= np.isfinite(w) & (w > 0)
+    pts_ok = pts[ok]
+    # drop repeated points (zero chord length breaks the chord parameterisation)
+    keep = np.concatenate([[True], np.hypot(*np.diff(pts_ok, axis=0).T) > 1e-12 * (1 + np.ptp(pts_ok))])
+    pts_ok = pts_ok[keep]
+    if len(pts_ok) < 4:
+        raise ValueError(f"need at least 4 distinct finite points for a cubic profile spline, got {len(pts_ok)}")
+    if smoothing is None:
+        smoothing = 0.0 if sigma is None else len(pts_ok) * float(sigma) ** 2
+    if smoothing < 0:
+        raise ValueError(f"smoothing must be >= 0, got {smoothing!r}")
+    ww = None if w is None else w[ok][keep]
+    chord = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(pts_ok, axis=0).T))])
+    u = chord / chord[-1]
+    spl, u = interpolate.make_splprep(pts_ok.T, u=u, s=float(smoothing), w=ww, k=3)
+    uu, ss = _arc_length_table(spl)
+    u_of_s = interpolate.PchipInterpolator(ss, uu)
+    fitted = np.asarray(spl(u)).T
+    res = np.full(len(pts), np.nan)
+    idx = np.flatnonzero(ok)[keep]
+    res[idx] = np.hypot(*(fitted - pts_ok).T)
+    return ProfileSpline(spline=spl, length=float(ss[-1]), residuals=res, _u_of_s=u_of_s)
+
+
+# --------------------------------------------------------------------------- revolution
+def to_chamber_frame(points, *, axis_point, angle=0.0, up=(0.0, -1.0)):
+    """Image points -> chamber coordinates (signed radial x, height z).
+
+    Parameters
+    ----------
+    points : array_like of shape (N, 2)
+        ``(col, row)`` image points (any unit).
+    axis_point : tuple of float
+        ``(col, row)`` where the chamber axis meets the flat membrane (the rim-plane centre).
+    angle : float, rad
+        Tilt of the flat membrane line, the angle of the line's direction
+        ``(dcol, drow)`` from the column axis (positive: rows grow to the right).
+    up : tuple of float
+        Unit bulge direction in ``(col, row)`` before tilt; default up (row 0).
+
+    Returns
+    -------
+    x, z : ndarray of shape (N,)
+        Signed distance from the axis along the flat membrane (positive to the
+        right of the bulge-up view) and height above the flat membrane.
+    """
+    p = np.asarray(points, float) - np.asarray(axis_point, float)
+    ux, uy = np.cos(angle), np.sin(angle)  # along the flat line
+    nx, ny = uy, -ux  # rotate +90 deg towards row 0 (image up for y down)
+    if np.dot((nx, ny), up) < 0:
+        nx, ny = -nx, -ny
+    return p[:, 0] * ux + p[:, 1] * uy, p[:, 0] * nx + p[:, 1] * ny
+
+
+def split_halves(x, z):
+    """Split an ordered dome curve at the axis into two halves, each from the axis to a rim.
+
+    Parameters
+    ----------
+    x, z : array_like of shape (N,)
+        Signed radial coordinate (left < 0 < right) and height, ordered from one rim to the other.
+
+    Returns
+    -------
+    (r_left, z_left), (r_right, z_right) : tuples of ndarray
+        Each half starts on the axis (r = 0, at the interpolated crossing) and
+        ends at its rim; r >= 0.  The crossing used is the highest one (the apex)
+        if the curve crosses the axis several times.
+    """
+    x = np.asarray(x, float)
+    z = np.asarray(z, float)
+    if x.shape != z.shape or x.ndim != 1:
+        raise ValueError(f"x and z must be 1-D of equal length, got {x.shape} and {z.shape}")
+    if x[0] > x[-1]:
+        x, z = x[::-1], z[::-1]
+    sgn = np.sign(x)
+    cross = np.flatnonzero((sgn[:-1] < 0) & (sgn[1:] >= 0) | (sgn[:-1] <= 0) & (sgn[1:] > 0))
+    if cross.size == 0:
+        raise ValueError("the curve does not cross the chamber axis (x = 0)")
+    zc = []
+    for i in cross:
+        t = -x[i] / (x[i + 1] - x[i]) if x[i + 1] != x[i] else 0.0
+        zc.append(z[i] + t * (z[i + 1] - z[i]))
+    k = int(np.argmax(zc))
+    i, z0 = cross[k], zc[k]
+    xl, zl = -x[i::-1], z[i::-1]
+    xr, zr = x[i + 1 :], z[i + 1 :]
+    if xl.size and xl[0] <= 0:  # a point exactly on the axis is the crossing itself
+        xl, zl = xl[1:], zl[1:]
+    if xr.size and xr[0] <= 0:
+        xr, zr = xr[1:], zr[1:]
+    left = (np.concatenate([[0.0], xl]), np.concatenate([[z0], zl]))
+    right = (np.concatenate([[0.0], xr]), np.concatenate([[z0], zr]))
+    return left, right
+
+
+def revolution_volume(r, z, *, close=True) -> float:
+    r"""Volume between the surface of revolution of a half profile and the plane z = 0.
+
+    Parameters
+    ----------
+    r, z : array_like of shape (N,)
+        Half profile ordered from the axis (r = 0) to the rim, any length unit.
+    close : bool
+        Close the curve with a vertical segment from its last point to z = 0
+        (the rim end rarely lies exactly on the plane).
+
+    Returns
+    -------
+    float
+        :math:`V = -\oint \pi r^2 dz` (unit**3), exact for the polyline; positive
+        for a dome above the plane, negative for a sag below it.  Valid for
+        overhanging (re-entrant) profiles.
+    """
+    r = np.asarray(r, float)
+    z = np.asarray(z, float)
+    if close:
+        r, z = np.append(r, r[-1]), np.append(z, 0.0)
+    r1, r2, dz = r[:-1], r[1:], np.diff(z)
+    return float(-np.pi * np.sum(dz * (r1 * r1 + r1 * r2 + r2 * r2) / 3.0))
+
+
+def revolution_area(r, z) -> float:
+    r"""Area of the surface of revolution of a half profile, :math:`A = 2\pi\int r\,ds`.
+
+    Parameters
+    ----------
+    r, z : array_like of shape (N,)
+        Half profile (any order), any length unit.
+
+    Returns
+    -------
+    float
+        Area (unit**2), exact for the polyline (sum of frustum lateral areas).
+    """
+    r = np.asarray(r, float)
+    z = np.asarray(z, float)
+    ds = np.hypot(np.diff(r), np.diff(z))
+    return float(np.pi * np.sum((r[:-1] + r[1:]) * ds))
+
+
+@dataclass(frozen=True)
+class RevolutionMeasures:
+    """Volumes and areas of the two halves of a dome (units of the input cubed / squared).
+
+    Attributes
+    ----------
+    volume_left, volume_right, area_left, area_right : float
+        Solid-of-revolution volume and surface area of each half about the axis.
+    height : float
+        Height of the curve on the axis (apex).
+    rim_left, rim_right : float
+        Radial position of each rim end.
+    """
+
+    volume_left: float
+    volume_right: float
+    area_left: float
+    area_right: float
+    height: float
+    rim_left: float
+    rim_right: float
+
+    @property
+    def volume(self) -> float:
+        """Mean of the two half volumes."""
+        return 0.5 * (self.volume_left + self.volume_right)
+
+    @property
+    def area(self) -> float:
+        """Mean of the two half areas."""
+        return 0.5 * (self.area_left + self.area_right)
+
+    @property
+    def volume_disagreement(self) -> float:
+        """``|V_left - V_right| / |mean|`` (dimensionless; nan for a zero volume)."""
+        m = abs(self.volume)
+        return float(abs(self.volume_left - self.volume_right) / m) if m > 0 else np.nan
+
+    @property
+    def area_disagreement(self) -> float:
+        """``|A_left - A_right| / mean``."""
+        m = abs(self.area)
+        return float(abs(self.area_left - self.area_right) / m) if m > 0 else np.nan
+
+
+def revolution_measures(x, z, *, close=True) -> RevolutionMeasures:
+    """Volume, area and height of a whole dome curve from its two halves.
+
+    Parameters
+    ----------
+    x, z : array_like of shape (N,)
+        Ordered dome curve, rim to rim, in chamber coordinates
+        (see :func:`to_chamber_frame`): signed radial position and height above
+        the flat membrane (any length unit).
+    close : bool
+        Passed to :func:`revolution_volume`.
+
+    Returns
+    -------
+    RevolutionMeasures
+
+    Examples
+    --------
+    >>> t = np.linspace(0, np.pi, 2001)
+    >>> m = revolution_measures(np.cos(t), np.sin(t))  # hemisphere, radius 1
+    >>> round(m.volume / (2 * np.pi / 3), 5), round(m.area / (2 * np.pi), 5)
+    (1.0, 1.0)
+    """
+    (rl, zl), (rr, zr) = split_halves(x, z)
+    return RevolutionMeasures(
+        volume_left=revolution_volume(rl, zl, close=close),
+        volume_right=revolution_volume(rr, zr, close=close),
+        area_left=revolution_area(rl, zl),
+        area_right=revolution_area(rr, zr),
+        height=float(zl[0]),
+        rim_left=float(rl[-1]),
+        rim_right=float(rr[-1]),
+    )
