@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+
 from osmobulge.imaging.geometry import (
     fit_ellipse,
     revolution_area,
