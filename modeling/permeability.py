@@ -261,34 +261,76 @@ def evaluate_permeability(permeability, lambda_bar, thickness=None):
 # ---------------------------------------------------------------------------
 # lmfit models
 # ---------------------------------------------------------------------------
+# Permeabilities are ~1e-12 m**2/s.  lmfit's transform for a ``min=0`` bound,
+# sqrt((x + 1)**2 - 1), loses every digit of such values, so the positive scale
+# constants are fitted as natural logarithms (``ln_*``, free) and the physical
+# constants are expressions of them (``min=0`` kept as documentation; stderr
+# propagated by lmfit).  This also conditions the problem.
+def _set_ln_hint(model, name, value):
+    model.set_param_hint(f"ln_{name}", value=math.log(value))
+    model.set_param_hint(name, expr=f"exp({model.prefix}ln_{name})", min=0.0)
+
+
 class ConstantPermeabilityModel(lmfit.Model):
-    """:class:`lmfit.Model` of a constant permeability ``p`` (m**2/s, min 0) over ``lambda_bar``."""
+    """:class:`lmfit.Model` of a constant permeability ``p`` (m**2/s) over ``lambda_bar``.
+
+    ``p = exp(ln_p)``: the free parameter is ``ln_p`` (see module notes).
+    """
 
     def __init__(self, independent_vars=("lambda_bar",), prefix="", nan_policy="raise", **kwargs):
         super().__init__(
             constant_permeability, independent_vars=list(independent_vars), prefix=prefix,
             nan_policy=nan_policy, **kwargs
         )
-        self.set_param_hint("p", min=0.0)
+        _set_ln_hint(self, "p", 2e-12)
 
     def guess(self, data, lambda_bar=None, **kwargs):
-        """Initial ``p``: the median of positive data."""
+        """Initial ``p``: the median of the positive data."""
         d = np.asarray(data, float)
         d = d[np.isfinite(d) & (d > 0)]
-        pars = self.make_params(p=float(np.median(d)) if d.size else 1e-12)
+        pars = self.make_params()
+        pars[f"{self.prefix}ln_p"].value = math.log(float(np.median(d)) if d.size else 2e-12)
         return lmfit.models.update_param_vals(pars, self.prefix, **kwargs)
 
 
 class DoubleExponentialModel(lmfit.Model):
-    r""":class:`lmfit.Model` of Eqn 27 over ``lambda_bar``; ``c1, c3 >= 0`` (m**2/s)."""
+    r""":class:`lmfit.Model` of Eqn 27 over ``lambda_bar``.
+
+    Free parameters, for conditioning: ``ln_a1``, ``ln_a3`` (logs of the two
+    terms at :math:`\bar\lambda = 1`, m**2/s), ``c4`` and ``gap = c4 - c2 >= 0``
+    (orders the terms: term 1 is the fast one).  Expressions: ``c1 = exp(ln_a1 - c2)``,
+    ``c3 = exp(ln_a3 - c4)``, ``c2 = c4 - gap`` and ``p_at_rest`` :math:`= P_w(1)`.
+    """
 
     def __init__(self, independent_vars=("lambda_bar",), prefix="", nan_policy="raise", **kwargs):
         super().__init__(
             double_exponential, independent_vars=list(independent_vars), prefix=prefix,
             nan_policy=nan_policy, **kwargs
         )
-        self.set_param_hint("c1", min=0.0)
-        self.set_param_hint("c3", min=0.0)
+        pf = self.prefix
+        self.set_param_hint("ln_a1", value=math.log(1e-12))
+        self.set_param_hint("ln_a3", value=math.log(1e-12))
+        self.set_param_hint("c4", value=-0.3)
+        self.set_param_hint("gap", value=5.0, min=0.0)
+        self.set_param_hint("c2", expr=f"{pf}c4 - {pf}gap")
+        self.set_param_hint("c1", expr=f"exp({pf}ln_a1 - {pf}c2)", min=0.0)
+        self.set_param_hint("c3", expr=f"exp({pf}ln_a3 - {pf}c4)", min=0.0)
+        self.set_param_hint("p_at_rest", expr=f"exp({pf}ln_a1) + exp({pf}ln_a3)", min=0.0)
+
+    def make_params_from(self, c1, c2, c3, c4) -> lmfit.Parameters:
+        """Parameters set to the Eqn 27 constants ``c1..c4`` (``c1, c3 > 0``; swapped if ``c2 > c4``)."""
+        if c2 > c4:
+            c1, c2, c3, c4 = c3, c4, c1, c2
+        if c1 <= 0 or c3 <= 0:
+            raise ValueError(f"c1 and c3 must be > 0 m^2/s, got {c1!r}, {c3!r}")
+        pars = self.make_params()
+        pf = self.prefix
+        pars[f"{pf}ln_a1"].value = math.log(c1) + c2
+        pars[f"{pf}ln_a3"].value = math.log(c3) + c4
+        pars[f"{pf}c4"].value = c4
+        pars[f"{pf}gap"].value = c4 - c2
+        pars.update_constraints()
+        return pars
 
     def guess(self, data, lambda_bar, **kwargs):
         """Initial constants: a log-linear fit to the upper half in stretch for the slow
@@ -297,7 +339,7 @@ class DoubleExponentialModel(lmfit.Model):
         d = np.asarray(data, float)
         ok = np.isfinite(lam) & np.isfinite(d) & (d > 0)
         lam, d = lam[ok], d[ok]
-        c1, c2, c3, c4 = 1e-12, -5.0, 1e-12, -0.3
+        c1, c2, c3, c4 = 1e-12 * math.exp(5.0), -5.0, 1e-12 * math.exp(0.3), -0.3
         if lam.size >= 4 and np.ptp(lam) > 0:
             order = np.argsort(lam)
             lam, d = lam[order], d[order]
@@ -311,20 +353,25 @@ class DoubleExponentialModel(lmfit.Model):
                 c2, lnc1 = np.polyfit(lam[lo], np.log(excess[lo]), 1)
                 c1 = math.exp(lnc1)
             else:
-                c1, c2 = 0.5 * d[0] * math.exp(5.0 * lam[0]), -5.0
-        pars = self.make_params(c1=c1, c2=c2, c3=c3, c4=c4)
+                c2 = c4 - 5.0
+                c1 = 0.5 * d[0] * math.exp(-c2 * lam[0])
+        pars = self.make_params_from(float(c1), float(c2), float(c3), float(c4))
         return lmfit.models.update_param_vals(pars, self.prefix, **kwargs)
 
 
 class FirpoModel(lmfit.Model):
-    r""":class:`lmfit.Model` of Eqn 26 over ``thickness`` (m); ``p_henry, critical_thickness > 0``."""
+    r""":class:`lmfit.Model` of Eqn 26 over ``thickness`` (m).
+
+    Free parameters ``ln_p_henry`` and ``ln_critical_thickness``; ``p_henry`` (m**2/s)
+    and ``critical_thickness`` (m) are their exponentials.
+    """
 
     def __init__(self, independent_vars=("thickness",), prefix="", nan_policy="raise", **kwargs):
         super().__init__(
             firpo, independent_vars=list(independent_vars), prefix=prefix, nan_policy=nan_policy, **kwargs
         )
-        self.set_param_hint("p_henry", min=0.0)
-        self.set_param_hint("critical_thickness", min=0.0)
+        _set_ln_hint(self, "p_henry", 4e-12)
+        _set_ln_hint(self, "critical_thickness", 20e-6)
 
     def guess(self, data, thickness, **kwargs):
         """Initial constants: :math:`L_c` = median thickness, :math:`P_{Henry}` = 2 x median data."""
@@ -332,6 +379,9 @@ class FirpoModel(lmfit.Model):
         d = np.asarray(data, float)
         ok = np.isfinite(t) & np.isfinite(d) & (d > 0) & (t > 0)
         lc = float(np.median(t[ok])) if ok.any() else 20e-6
-        ph = 2.0 * float(np.median(d[ok])) if ok.any() else 2e-12
-        pars = self.make_params(p_henry=ph, critical_thickness=lc)
+        ph = 2.0 * float(np.median(d[ok])) if ok.any() else 4e-12
+        pars = self.make_params()
+        pars[f"{self.prefix}ln_p_henry"].value = math.log(ph)
+        pars[f"{self.prefix}ln_critical_thickness"].value = math.log(lc)
+        pars.update_constraints()
         return lmfit.models.update_param_vals(pars, self.prefix, **kwargs)
