@@ -195,6 +195,7 @@ def write_points_imagej(path, points: Mapping[int, object], *, kind: str = "poin
     resolution in ImageJ's pixel-corner convention (``+0.5`` px).
     """
     import roifile
+
     from osmobulge.experiments._io import atomic_write_bytes
 
     if kind not in ROI_KINDS:

@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+
 from osmobulge.plugins import roi
 
 roifile = pytest.importorskip("roifile")

@@ -1,0 +1,372 @@
+"""Qt-free logic behind the osmobulge napari widgets.
+
+Everything the dock widgets do lives here as plain functions and one state
+object, :class:`CurationSession`, so it runs (and is tested) with no Qt and no
+display.  The numerics are the imaging library's: sub-pixel edge tracing and
+snapping (:mod:`osmobulge.imaging.trace`), ellipse and spline fits and the
+solid-of-revolution volume and area (:mod:`osmobulge.imaging.geometry`), and the
+extraction itself (:func:`osmobulge.imaging.extract`).  Decisions are stored
+with :mod:`osmobulge.experiments.curation` (atomic writes).
+
+Coordinates
+-----------
+- napari layers of an experiment: data ``(frame, row, col)`` in pixels, with the
+  image's ``scale = (1, p, p)`` (``p`` the pixel size in micrometres), so world
+  coordinates are ``(frame, y_um, x_um)``.
+- picked points, per frame: ``ndarray of shape (N, 2)``, ``(row, col)`` px.
+- the curation's manual profiles: ``(x, y)`` in metres, ``x = col * p``,
+  ``y = row * p`` (see :func:`osmobulge.experiments.curation.set_manual_profile`).
+- chamber coordinates: signed radial position and height above the flat
+  membrane (:func:`osmobulge.imaging.geometry.to_chamber_frame`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.sparse.csgraph import breadth_first_order, minimum_spanning_tree, shortest_path
+from scipy.spatial.distance import pdist, squareform
+
+from osmobulge.imaging.geometry import (
+    EllipseFit,
+    fit_ellipse,
+    revolution_measures,
+    smooth_profile,
+    to_chamber_frame,
+)
+
+__all__ = [
+    "BULGE_DIRECTIONS",
+    "ChamberGeometry",
+    "ProfileFit",
+    "fit_picked_profile",
+    "geometry_from_points",
+    "layer_data_to_picks",
+    "order_along_curve",
+    "picks_to_layer_data",
+    "points_m_to_rc",
+    "points_rc_to_m",
+]
+
+#: bulge directions in the image, and the unit ``(dcol, drow)`` vector of each
+BULGE_DIRECTIONS = {"up": (0.0, -1.0), "down": (0.0, 1.0), "left": (-1.0, 0.0), "right": (1.0, 0.0)}
+
+
+# --------------------------------------------------------------------------- conversions
+def picks_to_layer_data(picks: Mapping[int, np.ndarray]) -> np.ndarray:
+    """Per-frame ``(row, col)`` points -> napari points data ``(frame, row, col)``.
+
+    Parameters
+    ----------
+    picks : mapping of int to ndarray of shape (N, 2), px
+
+    Returns
+    -------
+    ndarray of shape (M, 3)
+        Rows sorted by frame, the order within each frame kept.
+    """
+    rows = [np.column_stack([np.full(len(p), f, float), np.asarray(p, float).reshape(-1, 2)])
+            for f, p in sorted(picks.items()) if len(p)]
+    return np.concatenate(rows) if rows else np.empty((0, 3))
+
+
+def layer_data_to_picks(data) -> dict[int, np.ndarray]:
+    """napari points data ``(frame, row, col)`` -> per-frame ``(row, col)`` points.
+
+    Parameters
+    ----------
+    data : array_like of shape (M, 3)
+        The frame coordinate is rounded to the nearest integer.
+
+    Returns
+    -------
+    dict of int to ndarray of shape (N, 2), px
+    """
+    data = np.asarray(data, float).reshape(-1, 3)
+    frames = np.rint(data[:, 0]).astype(int)
+    return {int(f): data[frames == f, 1:].copy() for f in np.unique(frames)}
+
+
+def points_rc_to_m(points_rc, pixel_size: float) -> np.ndarray:
+    """``(row, col)`` px -> the curation's ``(x, y)`` m.
+
+    Parameters
+    ----------
+    points_rc : array_like of shape (N, 2), px
+    pixel_size : float, m
+
+    Returns
+    -------
+    ndarray of shape (N, 2), m
+    """
+    p = np.asarray(points_rc, float).reshape(-1, 2)
+    return p[:, ::-1] * float(pixel_size)
+
+
+def points_m_to_rc(points_m, pixel_size: float) -> np.ndarray:
+    """The curation's ``(x, y)`` m -> ``(row, col)`` px (inverse of :func:`points_rc_to_m`).
+
+    Parameters
+    ----------
+    points_m : array_like of shape (N, 2), m
+    pixel_size : float, m
+
+    Returns
+    -------
+    ndarray of shape (N, 2), px
+    """
+    p = np.asarray(points_m, float).reshape(-1, 2)
+    return p[:, ::-1] / float(pixel_size)
+
+
+# --------------------------------------------------------------------------- ordering
+def order_along_curve(points_rc) -> np.ndarray:
+    """Order clicked points along the curve they sample (click order does not matter).
+
+    Parameters
+    ----------
+    points_rc : array_like of shape (N, 2)
+
+    Returns
+    -------
+    ndarray of int, shape (N,)
+        Permutation putting the points in order from one end of the curve to the other.
+
+    Notes
+    -----
+    The ends are the two ends of the longest path through the points' Euclidean
+    minimum spanning tree; points are then visited along that path, and any
+    point off it (a side branch) is inserted next to its nearest path point.
+    For points spread along a curve the spanning tree is the curve itself, so
+    the order holds for domes that overhang their rim, where sorting by a
+    coordinate fails.
+    """
+    p = np.asarray(points_rc, float).reshape(-1, 2)
+    n = len(p)
+    if n < 3:
+        return np.arange(n)
+    dist = squareform(pdist(p))
+    mst = minimum_spanning_tree(dist)
+    hops = shortest_path(mst, directed=False)
+    end_a = int(np.argmax(hops[0]))
+    end_b = int(np.argmax(hops[end_a]))
+    _, pred = breadth_first_order(mst, end_a, directed=False, return_predecessors=True)
+    path = [end_b]
+    while path[-1] != end_a:
+        path.append(int(pred[path[-1]]))
+    path = path[::-1]
+    on_path = set(path)
+    order = list(path)
+    # off-path points: insert next to the nearest path point, on the side of its nearer neighbour
+    for i in (j for j in range(n) if j not in on_path):
+        k = int(np.argmin(dist[i, order]))
+        before = dist[i, order[k - 1]] if k > 0 else np.inf
+        after = dist[i, order[k + 1]] if k + 1 < len(order) else np.inf
+        order.insert(k if before < after else k + 1, i)
+    return np.asarray(order)
+
+
+# --------------------------------------------------------------------------- chamber frame
+@dataclass(frozen=True)
+class ChamberGeometry:
+    """Where the chamber is in a frame: the origin and axes of the chamber coordinates.
+
+    Attributes
+    ----------
+    axis_point : tuple of float, px
+        ``(col, row)`` where the chamber axis meets the flat membrane line.
+    angle : float, rad
+        Direction of the flat membrane line from the column axis (image tilt).
+    up : tuple of float
+        Unit bulge direction ``(dcol, drow)`` (default: towards row 0).
+    source : str
+        Where it came from (``"extraction"``, ``"picked ends"``, ...).
+    """
+
+    axis_point: tuple
+    angle: float = 0.0
+    up: tuple = (0.0, -1.0)
+    source: str = ""
+
+    def to_chamber(self, points_rc) -> tuple[np.ndarray, np.ndarray]:
+        """``(row, col)`` px -> signed radial position and height (px)."""
+        p = np.asarray(points_rc, float).reshape(-1, 2)[:, ::-1]
+        return to_chamber_frame(p, axis_point=self.axis_point, angle=self.angle, up=self.up)
+
+    def to_image(self, x, z) -> np.ndarray:
+        """Chamber coordinates (px) -> ``(row, col)`` px (inverse of :meth:`to_chamber`)."""
+        x, z = np.asarray(x, float), np.asarray(z, float)
+        ux, uy = np.cos(self.angle), np.sin(self.angle)
+        nx, ny = uy, -ux
+        if np.dot((nx, ny), self.up) < 0:
+            nx, ny = -nx, -ny
+        col = self.axis_point[0] + x * ux + z * nx
+        row = self.axis_point[1] + x * uy + z * ny
+        return np.column_stack([row, col])
+
+
+def geometry_from_points(points_rc, *, up=(0.0, -1.0)) -> ChamberGeometry:
+    """Chamber frame from picked points whose two ends lie on the rim.
+
+    Parameters
+    ----------
+    points_rc : array_like of shape (N, 2), px
+        Points along the membrane, N >= 2; the ends of the curve are taken as the
+        two rim points (the flat membrane line passes through them).
+    up : tuple of float
+        Bulge direction ``(dcol, drow)``; orients the height axis.
+
+    Returns
+    -------
+    ChamberGeometry
+        Axis point halfway between the ends, angle of the line through them.
+    """
+    p = np.asarray(points_rc, float).reshape(-1, 2)
+    if len(p) < 2:
+        raise ValueError(f"points_rc: need at least 2 points to place the rim, got {len(p)}")
+    p = p[order_along_curve(p)]
+    (r0, c0), (r1, c1) = p[0], p[-1]
+    if (c1 - c0) * up[1] - (r1 - r0) * up[0] > 0:  # keep the line direction to the right of `up`
+        (r0, c0), (r1, c1) = (r1, c1), (r0, c0)
+    angle = float(np.arctan2(r1 - r0, c1 - c0))
+    return ChamberGeometry(axis_point=(0.5 * (c0 + c1), 0.5 * (r0 + r1)), angle=angle, up=tuple(up),
+                           source="picked ends")
+
+
+# --------------------------------------------------------------------------- fits
+@dataclass(frozen=True)
+class ProfileFit:
+    """Fits of one frame's picked points (falsy when no spline could be fitted).
+
+    Attributes
+    ----------
+    points_rc : ndarray of shape (N, 2), px
+        The points, ordered along the curve.
+    spline_rc : ndarray of shape (M, 2), px
+        Smoothing spline through the points, sampled every half pixel (empty if N < 4).
+    ellipse_rc : ndarray of shape (K, 2), px
+        Arc of the fitted ellipse above the flat membrane line (empty if N < 5 or the fit failed).
+    ellipse : EllipseFit
+        The ellipse fit in ``(col, row)`` pixel coordinates.
+    geometry : ChamberGeometry or None
+    volume, area : float, m**3 and m**2
+        Solid of revolution of the spline (mean of the two halves), nan without a spline.
+    volume_ellipse : float, m**3
+        The same for the ellipse arc (the paper's description), nan without an ellipse.
+    height : float, m
+        Height of the spline on the chamber axis.
+    volume_disagreement : float
+        ``|V_left - V_right| / V`` of the spline.
+    message : str
+        Why a fit is missing (empty when both fits exist).
+    """
+
+    points_rc: np.ndarray
+    spline_rc: np.ndarray = field(default_factory=lambda: np.empty((0, 2)))
+    ellipse_rc: np.ndarray = field(default_factory=lambda: np.empty((0, 2)))
+    ellipse: EllipseFit = field(default_factory=EllipseFit)
+    geometry: ChamberGeometry | None = None
+    volume: float = np.nan
+    area: float = np.nan
+    volume_ellipse: float = np.nan
+    height: float = np.nan
+    volume_disagreement: float = np.nan
+    message: str = ""
+
+    def __bool__(self) -> bool:
+        return bool(len(self.spline_rc) > 0 and np.isfinite(self.volume))
+
+
+def _ellipse_arc(ell: EllipseFit, geom: ChamberGeometry, n: int = 721) -> np.ndarray:
+    """The arc of the ellipse on the dome side of the flat line, as ``(row, col)`` px."""
+    t = np.linspace(0.0, 2 * np.pi, n, endpoint=False)
+    pts = ell.points(t)  # (col, row)
+    _, z = to_chamber_frame(pts, axis_point=geom.axis_point, angle=geom.angle, up=geom.up)
+    above = z >= 0
+    if above.all() or not above.any():
+        return np.empty((0, 2))
+    start = int(np.argmax(~above & np.roll(above, -1))) + 1  # first point of the run above the line
+    idx = (start + np.arange(n)) % n
+    m = int(np.argmin(above[idx]))
+    run = idx[:m]
+    # close the arc on the line: linear interpolation to z = 0 at both ends
+    ends = []
+    for i_in, i_out in ((run[0], idx[-1]), (run[-1], idx[m])):
+        w = z[i_in] / (z[i_in] - z[i_out])
+        ends.append(pts[i_in] + w * (pts[i_out] - pts[i_in]))
+    return np.vstack([ends[0], pts[run], ends[1]])[:, ::-1]
+
+
+def fit_picked_profile(points_rc, *, pixel_size: float, geometry: ChamberGeometry | None = None,
+                       sigma: float | None = None, up=(0.0, -1.0)) -> ProfileFit:
+    """Ellipse and smoothing spline through picked points, with the dome's volume and area.
+
+    Parameters
+    ----------
+    points_rc : array_like of shape (N, 2), px
+        Membrane points of one frame, in any order (see :func:`order_along_curve`).
+    pixel_size : float, m
+        Converts pixel results to SI.
+    geometry : ChamberGeometry, optional
+        The chamber frame (from the extraction); default: the line through the two
+        end points (:func:`geometry_from_points`).
+    sigma : float, px, optional
+        Expected scatter of the points about the membrane (spline smoothing,
+        :func:`osmobulge.imaging.geometry.smooth_profile`); default: interpolate.
+    up : tuple of float
+        Bulge direction ``(dcol, drow)`` when ``geometry`` is not given.
+
+    Returns
+    -------
+    ProfileFit
+        Falsy (with ``message``) with fewer than 4 points or when the curve does
+        not cross the chamber axis.
+
+    Notes
+    -----
+    Volume and area are the solids of revolution of each half profile about
+    the chamber axis (main text Sec. 2.3, :func:`osmobulge.imaging.geometry.revolution_measures`).
+    """
+    if not (np.isfinite(pixel_size) and pixel_size > 0):
+        raise ValueError(f"pixel_size must be a positive length in metres, got {pixel_size!r}")
+    p = np.asarray(points_rc, float).reshape(-1, 2)
+    p = p[np.all(np.isfinite(p), axis=1)]
+    if len(p) == 0:
+        return ProfileFit(points_rc=p, message="no points")
+    p = p[order_along_curve(p)]
+    if geometry is None:
+        if len(p) < 2:
+            return ProfileFit(points_rc=p, message="need at least 2 points")
+        geometry = geometry_from_points(p, up=up)
+    kw: dict = {"points_rc": p, "geometry": geometry}
+    msgs = []
+    ell = fit_ellipse(p[:, ::-1]) if len(p) >= 5 else EllipseFit(message=f"need 5 points for an ellipse, got {len(p)}")
+    kw["ellipse"] = ell
+    if ell:
+        arc = _ellipse_arc(ell, geometry)
+        kw["ellipse_rc"] = arc
+        if len(arc) >= 2:
+            x, z = geometry.to_chamber(arc)
+            try:
+                kw["volume_ellipse"] = revolution_measures(x, z).volume * pixel_size**3
+            except ValueError as err:
+                msgs.append(f"ellipse: {err}")
+    else:
+        msgs.append(ell.message)
+    if len(p) < 4:
+        msgs.append(f"need 4 points for a spline, got {len(p)}")
+        return ProfileFit(**kw, message="; ".join(msgs))
+    spl = smooth_profile(p[:, ::-1], sigma=sigma)
+    _, xy = spl.sample(step=0.5)
+    kw["spline_rc"] = xy[:, ::-1]
+    x, z = geometry.to_chamber(kw["spline_rc"])
+    try:
+        m = revolution_measures(x, z)
+    except ValueError as err:
+        msgs.append(f"spline: {err}")
+        return ProfileFit(**kw, message="; ".join(msgs))
+    kw.update(volume=m.volume * pixel_size**3, area=m.area * pixel_size**2, height=m.height * pixel_size,
+              volume_disagreement=m.volume_disagreement)
+    return ProfileFit(**kw, message="; ".join(msgs))
