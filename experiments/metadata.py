@@ -652,12 +652,6 @@ def validate_metadata(data: dict, base=None, *, check_frames: bool = True, path=
         elif len(given) > 1:
             problems.append(f"[imaging]: give only one of {', '.join(given)}")
 
-    # chamber sanity across keys
-    ch = values.get("chamber", {})
-    if "feed_concentration_M" in ch and "concentration_M" in ch and ch["feed_concentration_M"] == ch["concentration_M"]:
-        problems.append(f"[chamber] feed_concentration_M = {ch['feed_concentration_M']!r} equals concentration_M: "
-                        "no osmotic driving force")
-
     # frames exist
     files: list[Path] = []
     if check_frames and "frames" in im:
