@@ -343,7 +343,9 @@ def solve_volumes(
         q_lo[todo] = np.where(g < 0, np.maximum(q_lo[todo], qt), q_lo[todo])
         for k, v in res.items():
             result[k][todo] = np.where(ok, v, result[k][todo])
-        conv_t = ok & (np.abs(g) < rtol)
+        # ln V cannot be resolved better than the round-off of lam0 = ell + exp(q) allows
+        floor = 16.0 * np.finfo(float).eps * lam0 / np.exp(qt) * np.abs(curves.slope(q)[todo])
+        conv_t = ok & (np.abs(g) < np.maximum(rtol, floor))
         converged[todo] = conv_t
         # secant slope, falling back to the coarse family's slope
         with np.errstate(invalid="ignore", divide="ignore"):
