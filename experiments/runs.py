@@ -549,19 +549,8 @@ def run_batch(paths: Sequence, steps: Sequence[str] = STEPS, *, scheduler="proce
             for i, p in enumerate(paths):
                 done(i, _run_one(p, steps, force, options, pipeline))
         elif scheduler == "processes":
-            import multiprocessing
-            from concurrent.futures import ProcessPoolExecutor, as_completed
-
             n = max(1, min(workers or os.cpu_count() or 1, len(paths)))
-            ctx = multiprocessing.get_context("spawn")
-            with ProcessPoolExecutor(max_workers=n, mp_context=ctx) as pool:
-                futs = {pool.submit(_run_one, p, steps, force, options, pipeline): i for i, p in enumerate(paths)}
-                for fut in as_completed(futs):
-                    i = futs[fut]
-                    try:
-                        done(i, fut.result())
-                    except Exception as err:  # noqa: BLE001 - a worker died (killed, out of memory)
-                        done(i, _crashed(paths[i], err))
+            _run_pool(paths, n, done, (steps, force, options, pipeline))
             label = f"processes({n})"
         else:
             client, own = _dask_client(scheduler)
@@ -582,6 +571,45 @@ def run_batch(paths: Sequence, steps: Sequence[str] = STEPS, *, scheduler="proce
                 if own:
                     client.close()
     return BatchResult([results[i] for i in range(len(paths))], time.perf_counter() - t0, label)
+
+
+def _run_pool(paths, n, done, args):
+    """Local process pool; if a worker dies (the pool breaks), the unfinished experiments are
+    re-run each in its own single-process pool, so only the culprit is marked crashed."""
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor, as_completed
+    from concurrent.futures.process import BrokenProcessPool
+
+    ctx = multiprocessing.get_context("spawn")
+    finished: set[int] = set()
+    broken = False
+    with ProcessPoolExecutor(max_workers=n, mp_context=ctx) as pool:
+        futs = {pool.submit(_run_one, p, *args): i for i, p in enumerate(paths)}
+        for fut in as_completed(futs):
+            i = futs[fut]
+            try:
+                outcome = fut.result()
+            except BrokenProcessPool:
+                broken = True
+                continue
+            except Exception as err:  # noqa: BLE001 - e.g. an unpicklable result
+                outcome = _crashed(paths[i], err)
+            finished.add(i)
+            done(i, outcome)
+    if not broken:
+        return
+
+    def isolated(i):
+        with ProcessPoolExecutor(max_workers=1, mp_context=ctx) as one:
+            try:
+                return i, one.submit(_run_one, paths[i], *args).result()
+            except Exception as err:  # noqa: BLE001 - this experiment kills its worker
+                return i, _crashed(paths[i], err)
+
+    rest = [i for i in range(len(paths)) if i not in finished]
+    with ThreadPoolExecutor(max_workers=n) as threads:
+        for fut in as_completed([threads.submit(isolated, i) for i in rest]):
+            done(*fut.result())
 
 
 def _dask_client(scheduler):

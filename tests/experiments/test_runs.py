@@ -209,3 +209,73 @@ def test_killed_netcdf_write_leaves_no_half_file(tmp_path):
     xr.testing.assert_identical(xr.open_dataset(target, engine="h5netcdf").load(),
                                 xr.Dataset({"v": ("t", np.arange(3.0))}))
     assert all(p.name.startswith(".") for p in tmp_path.iterdir() if p != target)
+
+
+# ---- the same small pipeline in an importable module, for worker processes ----------------------------
+_WORKER_MODULE = '''
+import json, os
+import numpy as np
+from osmobulge.experiments import runs
+from osmobulge.experiments.runs import Step
+
+def fp(exp, options):
+    return {"frames": runs.frames_fingerprint(exp), "toml": exp.raw.get("chamber")}
+
+def compute(exp, results, options):
+    if (exp.path / "FAIL").exists():
+        os._exit(3) if (exp.path / "FAIL").read_text() == "die" else None
+        raise RuntimeError("injected failure")
+    total = sum(int(np.frombuffer(f.read_bytes(), np.uint8).sum()) for f in exp.frame_files())
+    runs.atomic_write_text(results / "sum.json", json.dumps({"total": total * exp.chamber.radius, "pid": os.getpid()}))
+    return {"total": total * exp.chamber.radius}
+
+PIPE = (Step("process", ("sum.json",), (), fp, compute),)
+'''
+
+
+@pytest.fixture
+def worker_pipe(tmp_path, monkeypatch):
+    mod_dir = tmp_path / "mods"
+    mod_dir.mkdir()
+    (mod_dir / "obworkerpipe.py").write_text(_WORKER_MODULE)
+    monkeypatch.syspath_prepend(str(mod_dir))
+    monkeypatch.setenv("PYTHONPATH", os.pathsep.join([str(mod_dir), os.environ.get("PYTHONPATH", "")]))
+    import importlib
+
+    return importlib.import_module("obworkerpipe").PIPE
+
+
+def _totals(dirs):
+    return [json.loads((d / "results" / "sum.json").read_text())["total"] for d in dirs]
+
+
+@pytest.mark.slow
+def test_process_pool_and_dask_cluster_equal_serial(tmp_path, worker_pipe):
+    distributed = pytest.importorskip("distributed")
+    serial = [_make(tmp_path / "serial", f"e{i}", i) for i in range(4)]
+    pool = [_make(tmp_path / "pool", f"e{i}", i) for i in range(4)]
+    dask = [_make(tmp_path / "dask", f"e{i}", i) for i in range(4)]
+    r0 = run_batch(serial, ["process"], scheduler="serial", pipeline=worker_pipe)
+    r1 = run_batch(pool, ["process"], scheduler="processes", workers=2, pipeline=worker_pipe)
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                  dashboard_address=None) as cluster:
+        r2 = run_batch(dask, ["process"], scheduler=cluster.scheduler_address, pipeline=worker_pipe)
+    assert r0.exit_code == r1.exit_code == r2.exit_code == EXIT_OK
+    assert r1.scheduler == "processes(2)" and r2.scheduler.startswith("dask(tcp://")
+    assert _totals(serial) == _totals(pool) == _totals(dask)
+    pids = {json.loads((d / "results" / "sum.json").read_text())["pid"] for d in dask}
+    assert os.getpid() not in pids
+    # the work ran in the workers, and the recorded summaries agree
+    for a, b in zip(serial, dask, strict=True):
+        assert read_state(a)["steps"]["process"]["summary"] == read_state(b)["steps"]["process"]["summary"]
+
+
+def test_worker_death_is_a_failed_experiment(tmp_path, worker_pipe):
+    dirs = [_make(tmp_path, f"e{i}", i) for i in range(2)]
+    (dirs[0] / "FAIL").write_text("die")  # the worker process exits abruptly
+    res = run_batch(dirs, ["process"], scheduler="processes", workers=1, pipeline=worker_pipe)
+    assert res.outcomes[0].status == "failed" and "worker crashed" in res.outcomes[0].error
+    assert res.exit_code == EXIT_FAILED
+    (dirs[0] / "FAIL").unlink()
+    res = run_batch(dirs, ["process"], scheduler="serial", pipeline=worker_pipe)
+    assert res.exit_code == EXIT_OK and [o.steps[0].status for o in res.outcomes] == ["done", "skipped"]
