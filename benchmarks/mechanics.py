@@ -45,6 +45,7 @@ import time  # noqa: E402
 import tracemalloc  # noqa: E402
 
 import numpy as np  # noqa: E402
+
 import osmobulge.modeling._shooting as shooting  # noqa: E402
 import osmobulge.modeling.bulge as bulge  # noqa: E402
 from osmobulge.modeling import bulge_mechanics, mechanics_table  # noqa: E402

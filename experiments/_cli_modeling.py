@@ -9,6 +9,7 @@ from typing import Annotated
 
 import numpy as np
 import typer
+
 from osmobulge.experiments._io import atomic_write_bytes, atomic_write_text
 from osmobulge.experiments.cli import app
 
@@ -51,9 +52,10 @@ def mechanics(
     as_json: Annotated[bool, typer.Option("--json", help="Print the table as JSON.")] = False,
 ):
     """Print (and plot) the mechanics table f_A, f_l, pressure vs Vtilde of a material."""
-    from osmobulge.modeling import bulge_mechanics, locking_volume
     from rich.console import Console
     from rich.table import Table
+
+    from osmobulge.modeling import bulge_mechanics, locking_volume
 
     mat = _material(material)
     fmt = _check_figure_path(plot, "--plot") if plot is not None else None

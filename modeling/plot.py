@@ -15,6 +15,7 @@ import math
 
 import numpy as np
 import xarray as xr
+
 from osmobulge.modeling.bulge import bulge_mechanics, bulge_profile, locking_volume, turgor_ratio
 from osmobulge.modeling.materials import PDMS, PEO_PDMS, PRESETS, LinearElastic, Material
 
@@ -183,6 +184,21 @@ def figure3_data(materials=None, *, thickness_over_radius=0.1, vtilde_max=None, 
     for m in mats:
         label = _label(m)
         labels.append(label if label not in labels else f"{label} #{len(labels)}")
+
+    # check the profile request before any solving
+    hyper = [i for i, m in enumerate(mats) if not isinstance(m, LinearElastic)]
+    pv = np.asarray(profile_vtildes, float).ravel()
+    if pv.size and not hyper:
+        raise ValueError("profile_vtildes needs a hyperelastic law in materials (LinearElastic has no profile)")
+    if np.any(~np.isfinite(pv)) or np.any(pv <= 0):
+        raise ValueError(f"profile_vtildes must be finite and > 0, got {profile_vtildes!r}")
+    profile_label = labels[hyper[0]] if hyper else ""
+    if pv.size and np.any(pv >= locks[hyper[0]]):
+        raise ValueError(
+            f"profile_vtildes must lie below the locking volume {locks[hyper[0]]:.4g} of {profile_label}, "
+            f"got max {pv.max():.6g}"
+        )
+
     quantities = ("area_ratio", "inverse_thickness", "pressure", "lambda_bar")
     curves = {q: np.full((len(mats), grid.size), np.nan) for q in (*quantities, "turgor_ratio")}
     for i, (m, lock) in enumerate(zip(mats, locks, strict=True)):
@@ -192,30 +208,14 @@ def figure3_data(materials=None, *, thickness_over_radius=0.1, vtilde_max=None, 
             curves[q][i, ok] = ds[q].values
         curves["turgor_ratio"][i, ok] = turgor_ratio(ds["pressure"].values, m, ratio)
 
-    hyper = [m for m in mats if not isinstance(m, LinearElastic)]
-    pv = np.asarray(profile_vtildes, float).ravel()
-    if pv.size and not hyper:
-        raise ValueError("profile_vtildes needs a hyperelastic law in materials (LinearElastic has no profile)")
-    if np.any(~np.isfinite(pv)) or np.any(pv <= 0):
-        raise ValueError(f"profile_vtildes must be finite and > 0, got {profile_vtildes!r}")
     n_rho = 201
     profile_vt = np.r_[0.0, np.sort(pv)]
     r = np.empty((profile_vt.size, n_rho))
     z = np.empty((profile_vt.size, n_rho))
     r[0], z[0] = np.linspace(0.0, 1.0, n_rho), 0.0  # flat membrane, lambda_pre = 1
-    profile_label = ""
-    if hyper:
-        pm = hyper[0]
-        profile_label = labels[mats.index(pm)]
-        plock = locking_volume(pm)
-        if np.any(pv >= plock):
-            raise ValueError(
-                f"profile_vtildes must lie below the locking volume {plock:.4g} of {profile_label}, "
-                f"got max {pv.max():.6g}"
-            )
-        for j, v in enumerate(profile_vt[1:], start=1):
-            prof = bulge_profile(pm, float(v), n=n_rho)
-            r[j], z[j] = prof["r"].values, prof["z"].values
+    for j, v in enumerate(profile_vt[1:], start=1):
+        prof = bulge_profile(mats[hyper[0]], float(v), n=n_rho)
+        r[j], z[j] = prof["r"].values, prof["z"].values
 
     one = {"units": "1"}
     data_vars = {

@@ -257,13 +257,16 @@ def test_small_volume_with_prestretch_is_a_tensioned_paraboloid(material, lambda
 
 
 @pytest.mark.parametrize(("material", "lambda_pre", "vtilde"),
-                         [(PDMS, 1.05, 1e-3), (NeoHookean(0.1e6), 1.05, 1e-3)],
-                         ids=["PDMS-1.05-1e-3", "neo-Hookean-1.05-1e-3"])
-def test_tiny_volume_with_prestretch_solves(material, lambda_pre, vtilde):
-    """Issue 2: Vtilde from 1e-3 for any lambda_pre >= 1."""
+                         [(PDMS, 1.05, 1e-3), (NeoHookean(0.1e6), 1.05, 1e-3), (PEO_PDMS, 1.0, 0.001096985797892384)],
+                         ids=["PDMS-1.05-1e-3", "neo-Hookean-1.05-1e-3", "PEO_PDMS-1.0-1.097e-3"])
+def test_tiny_volume_solves(material, lambda_pre, vtilde):
+    """Issue 2: Vtilde from 1e-3 for any lambda_pre >= 1 (these values were once rejected by a
+    convergence test finer than the round-off of the pole stretch)."""
     ds = bulge_mechanics(material, [vtilde], lambda_pre=lambda_pre)
     lp = lambda_pre
-    assert float(ds.area_ratio[0]) - lp**2 == pytest.approx(4.0 * vtilde**2 / lp**4, rel=1e-3)
+    # pre-tensioned: paraboloid; unstretched rim: the Hencky shape is within 0.3 % of the cap
+    rel = 1e-3 if lp > 1 else 1e-2
+    assert float(ds.area_ratio[0]) - lp**2 == pytest.approx(4.0 * vtilde**2 / lp**4, rel=rel)
 
 
 def test_linear_elastic_rows_are_the_closed_forms():
