@@ -51,7 +51,7 @@ BULGE_DIRECTIONS = ("auto", "up", "down", "left", "right")
 MODELS = ("constant_linear", "constant_hyperelastic", "double_exponential")
 _TIMESTAMP_SOURCES = ("files",)
 _MATERIAL_LAWS = ("neo-hookean", "mooney-rivlin", "gent", "gent-gent", "linear")
-_DERIVATIVES = ("piecewise", "savgol", "spline")
+_RATE_METHODS = ("bins", "savgol", "spline")
 
 
 class MetadataError(ValueError):
@@ -151,10 +151,11 @@ _SCHEMA: dict[str, dict[str, _Key]] = {
         "linear_window_volume_ratio": _Key("number", default=1.3, unit="", lo=1.0001, hi=100.0,
                                            doc="Largest V/V0 used by the constant, linear-elastic fit."),
         "instantaneous": _Key("bool", default=True, doc="Compute the instantaneous permeability (Eqn 25)."),
-        "derivative": _Key("str", default="piecewise", choices=_DERIVATIVES,
-                           doc="Rate estimate for the instantaneous permeability."),
-        "time_window_min": _Key("number", default=0.0, unit="min", lo=0.0, hi=1e6, si=60.0,
-                                doc="Bin width for the piecewise rates (0: automatic)."),
+        "rate_method": _Key("str", default="spline", choices=_RATE_METHODS,
+                            doc="Rates d(V/V0)/dt for the instantaneous permeability: 'bins' (the paper's "
+                            "overlapping time bins), 'savgol' or 'spline'."),
+        "bin_width_min": _Key("number", default=120.0, unit="min", lo=1.0, hi=1e5, si=60.0,
+                              hints=((1.0 / 60.0, "seconds"),), doc="Width of the time bins of rate_method = 'bins'."),
     },
 }
 _SECTIONS = tuple(_SCHEMA)
@@ -374,16 +375,17 @@ class AnalysisSpec:
     linear_window_volume_ratio : float
         Largest V/V0 of the constant, linear-elastic fit (paper: 1.3).
     instantaneous : bool
-    derivative : str
-    time_window : float, s
-        0 means automatic.
+    rate_method : str
+        ``bins``, ``savgol`` or ``spline`` (:func:`osmobulge.modeling.instantaneous.volume_rates`).
+    bin_width : float, s
+        Time-bin width of ``rate_method = "bins"``.
     """
 
     models: tuple = MODELS
     linear_window_volume_ratio: float = 1.3
     instantaneous: bool = True
-    derivative: str = "piecewise"
-    time_window: float = 0.0
+    rate_method: str = "spline"
+    bin_width: float = 7200.0
 
 
 @dataclass(frozen=True)
@@ -685,8 +687,7 @@ def validate_metadata(data: dict, base=None, *, check_frames: bool = True, path=
     an = values["analysis"]
     analysis = AnalysisSpec(
         models=tuple(an["models"]), linear_window_volume_ratio=an["linear_window_volume_ratio"],
-        instantaneous=an["instantaneous"], derivative=an["derivative"],
-        time_window=an["time_window_min"] * 60.0,
+        instantaneous=an["instantaneous"], rate_method=an["rate_method"], bin_width=an["bin_width_min"] * 60.0,
     )
     return Experiment(
         path=base, name=exp["name"], material_spec=material_spec, chamber=chamber, imaging=imaging,
@@ -806,8 +807,8 @@ bulge_direction = "auto"         # "auto", "up", "down", "left" or "right"
 models = ["constant_linear", "constant_hyperelastic", "double_exponential"]
 linear_window_volume_ratio = 1.3 # largest V/V0 of the constant, linear-elastic fit
 instantaneous = true             # instantaneous permeability (main text Eqn 25)
-derivative = "piecewise"         # "piecewise" (supplement Sec 7.3), "savgol" or "spline"
-time_window_min = 0.0            # bin width of the piecewise rates (0: automatic)
+rate_method = "spline"           # d(V/V0)/dt: "bins" (paper, supplement Sec 7.3), "savgol" or "spline"
+bin_width_min = 120.0            # width of the time bins of rate_method = "bins"
 '''
 
 

@@ -704,14 +704,522 @@ def _compute_report(exp: Experiment, results: Path, options: dict) -> dict:
     return {"report": str(path.name)}
 
 
+# ---- process -----------------------------------------------------------------------------------
+def _netcdf_safe_attrs(attrs: dict) -> dict:
+    out = {}
+    for k, v in attrs.items():
+        if v is None:
+            continue
+        if isinstance(v, bool):
+            v = int(v)
+        if isinstance(v, dict):
+            v = json.dumps(v, default=str)
+        out[str(k)] = v
+    return out
+
+
+def experiment_attrs(exp: Experiment) -> dict:
+    """netCDF-safe attrs describing the experiment (nested metadata stays in experiment.toml)."""
+    meta = exp.summary()
+    attrs = {f"experiment_{k}": v for k, v in meta.items() if v is not None and k not in
+             ("radius_um", "depth_um", "membrane_thickness_um", "concentration_M", "feed_concentration_M",
+              "temperature_K", "pixel_size_um", "frame_interval_min")}
+    attrs.update(exp.chamber.to_chamber().to_attrs())
+    attrs["osmobulge_code"] = code_version()
+    return _netcdf_safe_attrs(attrs)
+
+
+def _write_netcdf(ds, path: Path) -> None:
+    with atomic_path(path) as tmp:
+        ds.to_netcdf(tmp, engine="h5netcdf")
+
+
 def process_experiment(exp: Experiment, results: Path, **extract_options) -> dict:
-    """Extraction step (wired to osmobulge.imaging.extract once it lands)."""
-    raise NotImplementedError("osmobulge.imaging.extract is not available yet")
+    """The process step: extract the frames -> ``results/extraction.nc``.
+
+    Parameters
+    ----------
+    exp : Experiment
+    results : pathlib.Path
+        The results folder.
+    **extract_options
+        Passed to :func:`osmobulge.imaging.extract.extract`.
+
+    Returns
+    -------
+    dict
+        ``n_frames``, ``n_flagged``, ``flags`` (count per flag), ``n_manual``.
+    """
+    import numpy as np
+
+    from osmobulge.experiments.curation import load_curation
+    from osmobulge.imaging.extract import extract
+
+    cur = load_curation(exp.path)
+    im = exp.imaging
+    regions = cur.chamber_regions if cur.chamber_regions is not None else im.chamber_regions
+    manual = {int(f): np.asarray(v["points"], float) for f, v in cur.manual_profiles.items()}
+    kwargs = {"pixel_size": im.pixel_size, "chamber": exp.chamber.to_chamber(), "frame_interval": im.frame_interval}
+    if im.timestamps is not None:
+        kwargs["timestamps"] = np.asarray(im.timestamps, float)
+    if im.bulge_direction != "auto":
+        kwargs["bulge_direction"] = im.bulge_direction
+    if manual:
+        kwargs["manual_profiles"] = manual
+    if regions:
+        kwargs["chamber_regions"] = [dict(r) for r in regions]
+    kwargs.update(extract_options)
+    ds = extract(exp.frames_source(), **kwargs)
+    ds.attrs.update(experiment_attrs(exp))
+    _write_netcdf(ds, results / "extraction.nc")
+    flags = np.asarray(ds["flag"].values).astype(str).ravel() if "flag" in ds else np.array([], str)
+    counts = {str(k): int(v) for k, v in zip(*np.unique(flags, return_counts=True), strict=True)}
+    return {"n_frames": int(ds.sizes["time"]), "n_flagged": int(np.sum(flags != "ok")), "flags": counts,
+            "n_manual": len(manual)}
+
+
+# ---- fit ---------------------------------------------------------------------------------------
+#: fit step models -> (fit_permeability model, mechanics)
+MODEL_SPECS = {
+    "constant_linear": ("constant", "linear"),
+    "constant_hyperelastic": ("constant", "hyperelastic"),
+    "double_exponential": ("double_exponential", "hyperelastic"),
+}
+
+
+def observations_from_extraction(ds, exp: Experiment) -> list:
+    """Curated per-chamber observations for the fits.
+
+    Parameters
+    ----------
+    ds : xarray.Dataset
+        Extraction dataset after :func:`osmobulge.experiments.curation.apply_curation`.
+    exp : Experiment
+
+    Returns
+    -------
+    list of xarray.Dataset
+        One per chamber: ``volume_ratio`` over ``time`` (s) on the kept frames
+        with a finite volume, attrs = the chamber (SI) and ``label``.
+    """
+    import numpy as np
+    import xarray as xr
+
+    chamber = exp.chamber.to_chamber()
+    kept = np.asarray(ds["kept"].values, bool) if "kept" in ds else np.ones(ds.sizes["time"], bool)
+    if "volume_ratio" in ds:
+        vr = ds["volume_ratio"]
+    elif "volume" in ds:
+        vr = 1.0 + ds["volume"] / chamber.volume
+    else:
+        raise ValueError("extraction dataset has neither 'volume_ratio' nor 'volume'")
+    if "chamber" in vr.dims:
+        labels = [str(c) for c in ds["chamber"].values] if "chamber" in ds.coords else \
+            [str(i) for i in range(ds.sizes["chamber"])]
+        series = [(f"{exp.name}/{lab}", vr.isel(chamber=i).values) for i, lab in enumerate(labels)]
+    else:
+        series = [(exp.name, vr.values)]
+    t = np.asarray(ds["time"].values, float)
+    out = []
+    for label, v in series:
+        v = np.asarray(v, float)
+        use = kept & np.isfinite(v) & np.isfinite(t)
+        if use.sum() < 3:
+            raise ValueError(f"{label}: only {int(use.sum())} usable frames (kept, with a volume); need >= 3")
+        attrs = {**chamber.to_attrs(), "label": label}
+        out.append(xr.Dataset({"volume_ratio": ("time", v[use], {"units": "1", "long_name": "V/V0"})},
+                              coords={"time": ("time", t[use], {"units": "s"})}, attrs=attrs))
+    return out
+
+
+def _call_fit(observations, material, model: str, analysis):
+    from osmobulge.modeling.fitting import fit_permeability
+
+    fam, mech = MODEL_SPECS[model]
+    kwargs = {}
+    if model == "constant_linear":
+        kwargs["volume_ratio_max"] = analysis.linear_window_volume_ratio
+    return fit_permeability(observations, material, model=fam, mechanics=mech, **kwargs)
 
 
 def fit_experiment(exp: Experiment, results: Path, *, models=MODELS) -> dict:
-    """Fit step (wired to osmobulge.modeling.fitting once it lands)."""
-    raise NotImplementedError("osmobulge.modeling.fitting is not available yet")
+    """The fit step: curated extraction -> ``results/fits.json`` and ``results/fits.nc``.
+
+    Parameters
+    ----------
+    exp : Experiment
+    results : pathlib.Path
+    models : sequence of str
+        Any of :data:`~osmobulge.experiments.metadata.MODELS`.
+
+    Returns
+    -------
+    dict
+        Summary for ``state.json`` and the catalog: ``n_frames``, ``n_kept``,
+        ``P_w1`` (m**2/s) and ``P_w1_stderr`` of the best model ``fit_model``,
+        ``fit_rms`` (RMS residual of V/V0), the constant fits, ``n_warnings``.
+    """
+    import xarray as xr
+
+    from osmobulge.experiments.curation import apply_curation, load_curation
+
+    ds = xr.load_dataset(results / "extraction.nc", engine="h5netcdf")
+    cds = apply_curation(ds, load_curation(exp.path))
+    obs = observations_from_extraction(cds, exp)
+    result = fit_observations(obs, exp.material, models=models, analysis=exp.analysis, label=exp.name)
+    data = cds[["kept", "excluded", "exclusion_reason"]].copy()
+    out = result["dataset"].merge(data.rename({"time": "frame_time"}), compat="override")
+    out.attrs.update(experiment_attrs(exp))
+    out.attrs["n_kept"] = int(cds["kept"].sum())
+    _write_netcdf(out, results / "fits.nc")
+    js = result["json"]
+    js["experiment"] = exp.name
+    js["n_frames"] = int(cds.sizes["time"])
+    js["n_kept"] = int(cds["kept"].sum())
+    js["n_excluded"] = int(cds["excluded"].sum())
+    atomic_write_text(results / "fits.json", json.dumps(js, indent=1, default=_json_default) + "\n")
+    return _fit_summary(js)
+
+
+def _json_default(o):
+    import numpy as np
+
+    if isinstance(o, np.generic):
+        return o.item()
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    return str(o)
+
+
+def _finite(x):
+    import math
+
+    try:
+        x = float(x)
+    except (TypeError, ValueError):
+        return None
+    return x if math.isfinite(x) else None
+
+
+def _fit_summary(js: dict) -> dict:
+    models = js.get("models", {})
+    best = next((m for m in ("double_exponential", "constant_hyperelastic", "constant_linear")
+                 if models.get(m, {}).get("ok")), None)
+    s = {"n_frames": js.get("n_frames"), "n_kept": js.get("n_kept"), "n_excluded": js.get("n_excluded"),
+         "fit_model": best, "n_warnings": len(js.get("warnings", []))}
+    if best:
+        s["P_w1"] = models[best].get("P_w1")
+        s["P_w1_stderr"] = models[best].get("P_w1_stderr")
+        s["fit_rms"] = models[best].get("rms")
+    for m in ("constant_linear", "constant_hyperelastic"):
+        if models.get(m, {}).get("ok"):
+            s[f"P_w_{m}"] = models[m].get("P_w1")
+    return s
+
+
+def _model_curves(fit, observations, material, mechanics, n_fine=200):
+    """Model V/V0 at the data times and on a fine grid, per observation (simulate with the fitted law)."""
+    import numpy as np
+
+    from osmobulge.modeling.simulate import simulate
+    from osmobulge.modeling.transport import Chamber
+
+    at_data, fine = [], []
+    law = fit.permeability
+    for o in observations:
+        ch = Chamber.from_attrs(o.attrs)
+        t = np.asarray(o["time"].values, float)
+        t0 = max(t[0], 0.0)
+        tf = np.linspace(0.0, t[-1], n_fine)
+        grid = np.union1d(np.clip(t, 0.0, None), tf)
+        sim = simulate(ch, material, law, grid, mechanics=mechanics, on_limit="truncate")
+        tv, vv = np.asarray(sim["time"].values), np.asarray(sim["volume_ratio"].values)
+        interp = lambda x, tv=tv, vv=vv: np.interp(x, tv, vv, right=np.nan)  # noqa: E731
+        at_data.append(interp(np.clip(t, 0.0, None)))
+        fine.append((tf, interp(tf)))
+        del t0
+    return at_data, fine
+
+
+def fit_observations(observations, material, *, models=MODELS, analysis=None, label: str = "") -> dict:
+    """Fit each model to the observations together, plus the instantaneous permeability.
+
+    Parameters
+    ----------
+    observations : list of xarray.Dataset
+        From :func:`observations_from_extraction` (one or many chambers).
+    material
+        Membrane law.
+    models : sequence of str
+    analysis : AnalysisSpec, optional
+    label : str
+
+    Returns
+    -------
+    dict
+        ``json`` (JSON-safe: per model ``ok``, ``params``, ``stderr``,
+        ``P_w1``, ``P_w1_stderr``, ``rms``, ``report``, ``summary`` or
+        ``error``; ``instantaneous``; ``warnings``) and ``dataset`` (data,
+        model curves, residuals, ``modelfit_coefficients``/``modelfit_stderr``
+        over (``model``, ``param``), instantaneous values and bins).
+    """
+    import numpy as np
+    import xarray as xr
+
+    from osmobulge.experiments.metadata import AnalysisSpec
+
+    analysis = analysis or AnalysisSpec()
+    warnings: list[str] = []
+    n_obs = len(observations)
+    # data, flattened over chambers (dim "point")
+    t_all = np.concatenate([o["time"].values for o in observations])
+    v_all = np.concatenate([o["volume_ratio"].values for o in observations])
+    c_all = np.concatenate([np.full(o.sizes["time"], i) for i, o in enumerate(observations)])
+    labels = [str(o.attrs.get("label", i)) for i, o in enumerate(observations)]
+    js: dict = {"label": label, "code": code_version(), "material": repr(material), "models": {},
+                "analysis": dataclasses.asdict(analysis), "chambers": labels}
+    params_all: dict[str, dict] = {}
+    stderr_all: dict[str, dict] = {}
+    curves, fines = {}, {}
+    for model in models:
+        rec: dict = {"ok": False, "family": MODEL_SPECS[model][0], "mechanics": MODEL_SPECS[model][1]}
+        try:
+            fit = _call_fit(observations, material, model, analysis)
+            params = {k: float(v) for k, v in dict(fit.params).items()}
+            stderr = {k: _finite(v) for k, v in dict(getattr(fit, "stderr", {}) or {}).items()}
+            at_data, fine = _model_curves(fit, observations, material, MODEL_SPECS[model][1])
+            resid = v_all - np.concatenate(at_data)
+            used = np.isfinite(resid)
+            if model == "constant_linear":
+                used &= v_all <= analysis.linear_window_volume_ratio
+            rms = float(np.sqrt(np.nanmean(resid[used] ** 2))) if used.any() else None
+            p1 = _finite(fit.permeability(1.0))
+            rec.update(ok=True, params=params, stderr=stderr, P_w1=p1,
+                       P_w1_stderr=_p1_stderr(fit, model, stderr), rms=rms, n_points=int(used.sum()),
+                       report=str(fit.report()) if hasattr(fit, "report") else "",
+                       summary=_plain(fit.summary()) if hasattr(fit, "summary") else {})
+            params_all[model], stderr_all[model] = params, stderr
+            curves[model], fines[model] = np.concatenate(at_data), fine
+            warnings.extend(_fit_warnings(model, rec, fit))
+        except Exception as err:  # noqa: BLE001 - a model that fails is reported, the others go on
+            rec["error"] = f"{type(err).__name__}: {err}"
+            warnings.append(f"{model}: fit failed ({rec['error']})")
+        js["models"][model] = rec
+    # instantaneous permeability
+    inst_ds = None
+    if analysis.instantaneous:
+        try:
+            from osmobulge.modeling.instantaneous import analyze_instantaneous
+
+            opts = {"bin_width": analysis.bin_width} if analysis.rate_method == "bins" else {}
+            inst = analyze_instantaneous(observations, material, method=analysis.rate_method, direct=False, **opts)
+            js["instantaneous"] = _plain(inst.summary()) if hasattr(inst, "summary") else {}
+            js["instantaneous"]["P_w1"] = _finite(inst.eqn27.params.get("p_at_rest"))
+            js["instantaneous"]["P_w1_stderr"] = _finite(inst.eqn27.stderr.get("p_at_rest"))
+            inst_ds = inst.to_dataset()
+            d = js["models"].get("double_exponential", {})
+            if d.get("ok") and js["instantaneous"]["P_w1"] and d.get("P_w1"):
+                ratio = js["instantaneous"]["P_w1"] / d["P_w1"]
+                js["instantaneous"]["ratio_to_direct"] = ratio
+                if abs(ratio - 1) > 0.2:
+                    warnings.append(f"instantaneous P_w(1) differs from the direct Eqn 27 fit by "
+                                    f"{(ratio - 1) * 100:+.0f} %")
+        except Exception as err:  # noqa: BLE001
+            js["instantaneous"] = {"error": f"{type(err).__name__}: {err}"}
+            warnings.append(f"instantaneous permeability failed ({js['instantaneous']['error']})")
+    if len(t_all) < 8:
+        warnings.append(f"only {len(t_all)} usable frames")
+    js["warnings"] = warnings
+    # dataset
+    ds = xr.Dataset(
+        {"time": ("point", t_all, {"units": "s", "long_name": "time since the time origin"}),
+         "volume_ratio": ("point", v_all, {"units": "1", "long_name": "observed V/V0"}),
+         "chamber_index": ("point", c_all, {"units": "1", "long_name": "index of the chamber"})},
+        coords={"chamber_label": ("chamber_index_dim", labels)},
+    )
+    fitted = [m for m in models if m in curves]
+    if fitted:
+        names = sorted({k for m in fitted for k in params_all[m]})
+        ds = ds.assign_coords(model=fitted, param=names)
+        ds["model_volume_ratio"] = (("model", "point"), np.array([curves[m] for m in fitted]),
+                                    {"units": "1", "long_name": "model V/V0 at the data times"})
+        ds["residual"] = (("model", "point"), v_all[None, :] - ds["model_volume_ratio"].values,
+                          {"units": "1", "long_name": "observed minus model V/V0"})
+        ds["modelfit_coefficients"] = (("model", "param"), np.array(
+            [[params_all[m].get(k, np.nan) for k in names] for m in fitted]), {"long_name": "fitted parameters"})
+        ds["modelfit_stderr"] = (("model", "param"), np.array(
+            [[(stderr_all[m].get(k) if stderr_all[m].get(k) is not None else np.nan) for k in names]
+             for m in fitted]), {"long_name": "standard errors"})
+        nf = len(fines[fitted[0]][0][0])
+        ds["fine_time"] = (("chamber", "fine"), np.array([f[0] for f in fines[fitted[0]]]), {"units": "s"})
+        ds["fine_volume_ratio"] = (("model", "chamber", "fine"),
+                                   np.array([[f[1] for f in fines[m]] for m in fitted]),
+                                   {"units": "1", "long_name": "model V/V0 (fine time grid)"})
+        del nf
+    if inst_ds is not None:
+        inst_ds = inst_ds.rename({k: f"inst_{k}" for k in list(inst_ds.data_vars) + list(inst_ds.coords)
+                                  if k not in ds and not k.startswith("inst_")})
+        inst_ds = inst_ds.rename_dims({d: f"inst_{d}" for d in inst_ds.dims if not d.startswith("inst_")})
+        inst_ds.attrs = {}
+        ds = ds.merge(inst_ds, compat="override")
+    ds.attrs.update({"title": f"permeability fits of {label}", "osmobulge_code": code_version(),
+                     "models": ",".join(models), "n_chambers": n_obs})
+    return {"json": js, "dataset": ds}
+
+
+def _plain(obj):
+    """JSON-safe copy (numpy scalars -> floats, NaN -> None)."""
+    import math
+
+    import numpy as np
+
+    if isinstance(obj, dict):
+        return {str(k): _plain(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [_plain(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return _plain(obj.tolist())
+    if isinstance(obj, np.generic):
+        obj = obj.item()
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    if obj is None or isinstance(obj, str | int | float | bool):
+        return obj
+    return str(obj)
+
+
+def _p1_stderr(fit, model: str, stderr: dict):
+    """Standard error of P_w(1): the constant's own, or propagated through the covariance of Eqn 27."""
+    import numpy as np
+
+    for attr in ("permeability_stderr", "stderr_at"):
+        f = getattr(fit, attr, None)
+        if callable(f):
+            try:
+                return _finite(f(1.0))
+            except Exception:  # noqa: BLE001
+                break
+    if len(stderr) == 1:
+        return next(iter(stderr.values()))
+    cov = getattr(fit, "covar", None)
+    names = list(dict(fit.params))
+    if cov is None or model != "double_exponential" or not {"c1", "c2", "c3", "c4"} <= set(names):
+        return None
+    p = {k: float(v) for k, v in dict(fit.params).items()}
+    grad = {"c1": np.exp(p["c2"]), "c2": p["c1"] * np.exp(p["c2"]),
+            "c3": np.exp(p["c4"]), "c4": p["c3"] * np.exp(p["c4"])}
+    g = np.array([grad.get(k, 0.0) for k in names])
+    cov = np.asarray(cov, float)
+    if cov.shape != (len(g), len(g)):
+        return None
+    return _finite(np.sqrt(g @ cov @ g))
+
+
+def _fit_warnings(model: str, rec: dict, fit) -> list[str]:
+    out = []
+    if rec.get("rms") is not None and rec["rms"] > 0.05:
+        out.append(f"{model}: RMS residual {rec['rms']:.3g} in V/V0 (> 0.05): the model does not follow the data")
+    for k, v in rec.get("stderr", {}).items():
+        val = rec["params"].get(k)
+        if v is None:
+            out.append(f"{model}: no uncertainty for {k} (at a bound or not identifiable)")
+        elif val and abs(v / val) > 0.5:
+            out.append(f"{model}: {k} = {val:.3g} +/- {v:.2g} is poorly determined (> 50 %)")
+    if model == "constant_linear" and rec.get("n_points", 0) < 4:
+        out.append(f"constant_linear: only {rec.get('n_points')} points in the linear window")
+    for w in getattr(fit, "warnings", ()) or ():
+        out.append(f"{model}: {w}")
+    return out
+
+
+# ---- campaign ------------------------------------------------------------------------------------
+def run_campaign(paths, out, *, group_by="material", models=MODELS, progress: bool = False) -> dict:
+    """Simultaneous fits across experiments, per group, with their own report.
+
+    Each group (by default one per material: the paper's Table 3) is fitted with
+    every model at once over all its chambers' curated V/V0(t) curves, and the
+    instantaneous permeability is binned by stretch across the chambers (Fig. 6a).
+
+    Parameters
+    ----------
+    paths : sequence of path
+        Experiment folders with a done ``process`` step.
+    out : path
+        Output folder: ``campaign.json``, ``campaign.nc`` (one netCDF group per
+        experiment group) and ``report.html``.
+    group_by : str or sequence of str
+        Catalog columns: ``material`` (default), ``condition``, ``geometry``, ``loading``.
+    models : sequence of str
+    progress : bool
+
+    Returns
+    -------
+    dict
+        JSON-safe summary: ``groups`` (each with ``group``, ``n_experiments``,
+        ``experiments``, ``models`` -> ``ok``, ``P_w1``, ``P_w1_stderr``,
+        ``rms``, ``params``, ``stderr``; ``instantaneous``; ``warnings``) and ``report``.
+
+    Raises
+    ------
+    ValueError
+        No experiment, an unknown grouping key, or a group mixing materials.
+    """
+    import xarray as xr
+
+    from osmobulge.experiments.curation import apply_curation, load_curation
+    from osmobulge.experiments.metadata import load_experiment
+
+    keys = [group_by] if isinstance(group_by, str) else list(group_by)
+    valid = ("material", "condition", "geometry", "loading")
+    bad = [k for k in keys if k not in valid]
+    if bad:
+        raise ValueError(f"group_by = {bad}: expected any of {valid}")
+    exps = [load_experiment(p, check_frames=False) for p in paths]
+    if not exps:
+        raise ValueError("campaign: no experiment with results to fit")
+    groups: dict[str, list] = {}
+    for e in exps:
+        g = {**e.groups(), "condition": e.condition}
+        groups.setdefault(" | ".join(str(g[k]) for k in keys), []).append(e)
+    out = Path(out)
+    summary = {"group_by": keys, "code": code_version(), "groups": []}
+    datasets = {}
+    with _progress(progress, len(groups)) as tick:
+        for label, members in sorted(groups.items()):
+            mats = {m.material_name for m in members}
+            if len(mats) > 1:
+                raise ValueError(f"group {label!r} mixes materials {sorted(mats)}: group by material too")
+            obs, frames = [], {}
+            for e in members:
+                ds = xr.load_dataset(e.results_dir / "extraction.nc", engine="h5netcdf")
+                cds = apply_curation(ds, load_curation(e.path))
+                o = observations_from_extraction(cds, e)
+                for item in o:
+                    item.attrs["condition"] = e.condition
+                obs.extend(o)
+                frames[e.name] = int(cds["kept"].sum())
+            res = fit_observations(obs, members[0].material, models=models, analysis=members[0].analysis,
+                                   label=label)
+            js = res["json"]
+            js.update(group=label, n_experiments=len(members), experiments=[str(e.path) for e in members],
+                      conditions=sorted({e.condition for e in members}), kept_frames=frames,
+                      material=members[0].material_name)
+            summary["groups"].append(js)
+            datasets[label] = res["dataset"]
+            tick(ExperimentOutcome(path=str(out), name=label))
+    out.mkdir(parents=True, exist_ok=True)
+    with atomic_path(out / "campaign.nc") as tmp:
+        mode = "w"
+        for i, (label, ds) in enumerate(sorted(datasets.items())):
+            ds.attrs["group"] = label
+            ds.to_netcdf(tmp, mode=mode, group=f"group{i}", engine="h5netcdf")
+            mode = "a"
+    from osmobulge.experiments.report import write_campaign_report
+
+    report = write_campaign_report(summary, datasets, out / "report.html")
+    summary["report"] = str(report)
+    atomic_write_text(out / "campaign.json", json.dumps(_plain(summary), indent=1) + "\n")
+    return _plain(summary)
 
 
 _DEFAULT_PIPELINE = {
