@@ -292,6 +292,12 @@ class ConstantPermeabilityModel(lmfit.Model):
         pars[f"{self.prefix}ln_p"].value = math.log(float(np.median(d)) if d.size else 2e-12)
         return lmfit.models.update_param_vals(pars, self.prefix, **kwargs)
 
+    def fit_starts(self, p_rest, p_mean, thickness):
+        """Starting points for ODE fits: the best constant ``p_mean`` (m**2/s)."""
+        pars = self.make_params()
+        pars[f"{self.prefix}ln_p"].value = math.log(p_mean)
+        return [pars]
+
 
 class DoubleExponentialModel(lmfit.Model):
     r""":class:`lmfit.Model` of Eqn 27 over ``lambda_bar``.
@@ -358,6 +364,19 @@ class DoubleExponentialModel(lmfit.Model):
         pars = self.make_params_from(float(c1), float(c2), float(c3), float(c4))
         return lmfit.models.update_param_vals(pars, self.prefix, **kwargs)
 
+    def fit_starts(self, p_rest, p_mean, thickness):
+        """Starting points for ODE fits from the small-deflection and all-data constant fits.
+
+        The slow term starts at ``p_mean`` (what the stretched membrane passes on
+        average), the fast one makes up ``p_rest`` at rest; two decay rates.
+        """
+        a3 = min(p_mean, 0.75 * p_rest)
+        a1 = max(p_rest - a3, 0.25 * p_rest)
+        starts = []
+        for c4, gap in ((-0.3, 6.0), (-0.1, 12.0), (-1.0, 3.0)):
+            starts.append(self.make_params_from(a1 * math.exp(-(c4 - gap)), c4 - gap, a3 * math.exp(-c4), c4))
+        return starts
+
 
 class FirpoModel(lmfit.Model):
     r""":class:`lmfit.Model` of Eqn 26 over ``thickness`` (m).
@@ -385,3 +404,14 @@ class FirpoModel(lmfit.Model):
         pars[f"{self.prefix}ln_critical_thickness"].value = math.log(lc)
         pars.update_constraints()
         return lmfit.models.update_param_vals(pars, self.prefix, **kwargs)
+
+    def fit_starts(self, p_rest, p_mean, thickness):
+        """Starting points for ODE fits: :math:`L_c = l_0` and :math:`l_0/4`, through ``p_rest`` at :math:`l_0`."""
+        starts = []
+        for lc in (thickness, thickness / 4):
+            pars = self.make_params()
+            pars[f"{self.prefix}ln_p_henry"].value = math.log(p_rest * (1 + lc / thickness))
+            pars[f"{self.prefix}ln_critical_thickness"].value = math.log(lc)
+            pars.update_constraints()
+            starts.append(pars)
+        return starts

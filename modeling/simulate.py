@@ -7,7 +7,7 @@ The flux ODE is scalar and autonomous, :math:`dv/dt = g(v)` with
 
 :class:`VolumePath` evaluates the mechanics (:math:`f_A, f_l, P_t,
 \bar\lambda`) once on a graded :math:`v` grid from :math:`v_0` towards the end of
-the motion, integrates :math:`1/g` cumulatively (Simpson), and interpolates
+the motion, integrates :math:`1/g` cumulatively (piecewise parabolas, O(h^4)), and interpolates
 :math:`v(t)` with cubic Hermite polynomials using the exact slopes
 :math:`g(v_i)`.  Where the driving force vanishes (an equilibrium volume
 :math:`v_{eq}`: osmotic pull equals turgor, or :math:`V/V_0 \to 1` in isotonic
@@ -30,7 +30,6 @@ import math
 
 import numpy as np
 import xarray as xr
-from scipy.integrate import cumulative_simpson
 from scipy.interpolate import CubicHermiteSpline
 from scipy.optimize import brentq
 
@@ -62,6 +61,44 @@ SIMULATE_ATTRS = {
     "permeability": {"units": "m^2/s", "long_name": "water permeability P_w"},
     "volume_rate": {"units": "1/s", "long_name": "rate d(V/V0)/dt"},
 }
+
+
+def _cumulative_quadratic(f, x):
+    """Cumulative integral of samples ``f`` on a strictly increasing, possibly non-uniform ``x``.
+
+    Each interval is integrated with the parabola through it and its right
+    neighbour and with the one through its left neighbour, averaged (the
+    two-parabola average is the 4-point cubic rule on uniform grids, error O(h^4));
+    the end intervals use the single parabola available.
+    """
+    n = x.size
+    if n < 3:
+        return np.concatenate([[0.0], np.cumsum(0.5 * (f[1:] + f[:-1]) * np.diff(x))])
+    h = np.diff(x)
+
+    def parabola(h, d, fa, fb, fc):
+        # integral over [0, h] of the parabola through (0, fa), (h, fb), (d, fc)
+        return (fa * (h / 2 - h * h / (6 * d)) + fb * h * (2 * h - 3 * d) / (6 * (h - d))
+                - fc * h**3 / (6 * d * (d - h)))
+
+    fwd = parabola(h[:-1], x[2:] - x[:-2], f[:-2], f[1:-1], f[2:])  # intervals 0..n-3
+    bwd = parabola(h[1:], x[:-2] - x[1:-1], f[1:-1], f[2:], f[:-2])  # intervals 1..n-2
+    integral = np.empty(n - 1)
+    integral[0] = fwd[0]
+    integral[-1] = bwd[-1]
+    integral[1:-1] = 0.5 * (fwd[1:] + bwd[:-1])
+    return np.concatenate([[0.0], np.cumsum(integral)])
+
+
+def _hermite(tn, vn, gn, tq):
+    """Cubic Hermite interpolation of ``v(t)`` with slopes ``g`` at ``tq`` inside ``[tn[0], tn[-1]]``."""
+    i = np.clip(np.searchsorted(tn, tq, side="right") - 1, 0, tn.size - 2)
+    h = tn[i + 1] - tn[i]
+    s = (tq - tn[i]) / h
+    s2 = s * s
+    s3 = s2 * s
+    return ((2 * s3 - 3 * s2 + 1) * vn[i] + (s3 - 2 * s2 + s) * h * gn[i]
+            + (3 * s2 - 2 * s3) * vn[i + 1] + (s3 - s2) * h * gn[i + 1])
 
 
 class MechanicsRangeError(ValueError):
@@ -240,16 +277,30 @@ class VolumePath:
             return np.zeros(1), np.zeros(1)
         if self.end == "limit":
             # x = |v - v0|: dt/dx = 1/|g|
-            t = cumulative_simpson(1.0 / np.abs(g), x=self._x, initial=0.0)
+            t = _cumulative_quadratic(1.0 / np.abs(g), self._x)
         else:
             # x = s = -ln(|v - v_eq|/|v0 - v_eq|): dt/ds = |v - v_eq| / |g|, finite at the equilibrium
-            t = cumulative_simpson(np.abs(self.v - self.v_end) / np.abs(g), x=self._x, initial=0.0)
+            t = _cumulative_quadratic(np.abs(self.v - self.v_end) / np.abs(g), self._x)
         return t, g
 
-    def interpolant(self, pw):
-        """``(spline, t_end, rate)``: cubic Hermite :math:`v(t)` on the grid's time span."""
+    def nodes(self, pw):
+        """``(t, v, rate)`` at the grid nodes for permeabilities ``pw`` (m**2/s) on the grid.
+
+        Times are strictly increasing (nodes an extreme trial law in a fit would
+        stall in floating point are dropped).
+        """
         t, g = self.solve(pw)
-        return CubicHermiteSpline(t, self.v, g, extrapolate=False), t, g
+        keep = np.isfinite(t)
+        keep[1:] &= np.diff(t) > 0
+        if not keep.all():
+            keep &= np.concatenate([[True], np.maximum.accumulate(np.where(keep, t, -np.inf))[:-1] < t[1:]])
+            return t[keep], self.v[keep], g[keep]
+        return t, self.v, g
+
+    def interpolant(self, pw):
+        """:class:`scipy.interpolate.CubicHermiteSpline` of :math:`v(t)` through the nodes."""
+        t, v, g = self.nodes(pw)
+        return CubicHermiteSpline(t, v, g, extrapolate=False)
 
     def volume_ratio(self, t, permeability=None, *, pw=None, beyond="raise"):
         """:math:`V/V_0` at times ``t`` (s).
@@ -273,15 +324,15 @@ class VolumePath:
             return np.full(t.shape, self.v0)
         if pw is None:
             pw = self.permeability_on_grid(permeability)
-        spline, tn, g = self.interpolant(pw)
+        tn, vn, g = self.nodes(pw)
         out = np.empty(t.shape)
         inside = t <= tn[-1]
-        out[inside] = spline(t[inside])
+        out[inside] = _hermite(tn, vn, g, t[inside])
         after = ~inside
         if after.any():
             if self.end == "equilibrium":
-                k = abs(g[-1] / (self.v[-1] - self.v_end))
-                out[after] = self.v_end + (self.v[-1] - self.v_end) * np.exp(-k * (t[after] - tn[-1]))
+                k = abs(g[-1] / (vn[-1] - self.v_end))
+                out[after] = self.v_end + (vn[-1] - self.v_end) * np.exp(-k * (t[after] - tn[-1]))
             elif beyond == "clip":
                 out[after] = self.v_end
             elif beyond == "nan":
