@@ -29,6 +29,8 @@ import numpy as np
 from scipy.sparse.csgraph import breadth_first_order, minimum_spanning_tree, shortest_path
 from scipy.spatial.distance import pdist, squareform
 
+from osmobulge.imaging._chamber import band_edges
+from osmobulge.imaging._normals import polyline_normals, sample_normals
 from osmobulge.imaging.geometry import (
     EllipseFit,
     fit_ellipse,
@@ -40,7 +42,9 @@ from osmobulge.imaging.geometry import (
 __all__ = [
     "BULGE_DIRECTIONS",
     "ChamberGeometry",
+    "POLARITIES",
     "ProfileFit",
+    "SnapResult",
     "fit_picked_profile",
     "geometry_from_points",
     "layer_data_to_picks",
@@ -48,8 +52,11 @@ __all__ = [
     "picks_to_layer_data",
     "points_m_to_rc",
     "points_rc_to_m",
+    "snap_points",
 ]
 
+#: membrane contrast: +1 dark band on a light background, -1 bright band, or detect it
+POLARITIES = ("auto", 1, -1)
 #: bulge directions in the image, and the unit ``(dcol, drow)`` vector of each
 BULGE_DIRECTIONS = {"up": (0.0, -1.0), "down": (0.0, 1.0), "left": (-1.0, 0.0), "right": (1.0, 0.0)}
 
@@ -370,3 +377,130 @@ def fit_picked_profile(points_rc, *, pixel_size: float, geometry: ChamberGeometr
     kw.update(volume=m.volume * pixel_size**3, area=m.area * pixel_size**2, height=m.height * pixel_size,
               volume_disagreement=m.volume_disagreement)
     return ProfileFit(**kw, message="; ".join(msgs))
+
+
+# --------------------------------------------------------------------------- snapping
+@dataclass(frozen=True)
+class SnapResult:
+    """Picked points moved onto the membrane band's midline.
+
+    Attributes
+    ----------
+    points_rc : ndarray of shape (N, 2), px
+        Snapped points, in the order given (points that found no band are left where they were).
+    moved : ndarray of shape (N,), px
+        Distance each point moved (0 where it did not snap).
+    snapped : ndarray of bool, shape (N,)
+        Which points found the band.
+    polarity : int
+        The band contrast used (+1 dark, -1 bright).
+    """
+
+    points_rc: np.ndarray
+    moved: np.ndarray
+    snapped: np.ndarray
+    polarity: int
+
+
+def _normals_rc(points_rc, up):
+    """Unit normals ``(dcol, drow)`` of the curve through the points (in the given order)."""
+    p = np.asarray(points_rc, float)
+    if len(p) == 1:
+        return np.array([up], float)
+    order = order_along_curve(p)
+    xy = p[order][:, ::-1]
+    nrm = polyline_normals(xy, smooth=0.0)
+    out = np.empty_like(nrm)
+    out[order] = nrm
+    return out
+
+
+def _pixel_noise(img, points_rc, margin):
+    """Robust pixel noise sigma near the points: MAD of each pixel minus its 4 neighbours' mean."""
+    h, w = img.shape
+    r0, c0 = np.floor(points_rc.min(axis=0) - margin - 2).astype(int)
+    r1, c1 = np.ceil(points_rc.max(axis=0) + margin + 3).astype(int)
+    patch = img[max(r0, 0):min(r1, h), max(c0, 0):min(c1, w)]
+    if min(patch.shape) < 3:
+        return 0.0
+    core = patch[1:-1, 1:-1]
+    d = core - 0.25 * (patch[:-2, 1:-1] + patch[2:, 1:-1] + patch[1:-1, :-2] + patch[1:-1, 2:])
+    # var(d) = sigma**2 (1 + 4/16) for white noise
+    return 1.4826 * float(np.median(np.abs(d - np.median(d)))) / np.sqrt(1.25)
+
+
+def snap_points(image, points_rc, *, search: float = 6.0, step: float = 0.25, polarity="auto",
+                up=(0.0, -1.0), passes: int = 2, min_snr: float = 8.0) -> SnapResult:
+    """Move picked points onto the midline of the membrane band, with sub-pixel accuracy.
+
+    Parameters
+    ----------
+    image : array_like of shape (H, W)
+        The frame the points were picked on.
+    points_rc : array_like of shape (N, 2), px
+        Picked points ``(row, col)``, in any order.
+    search : float, px
+        How far along the curve's normal to look on either side of each point.
+    step : float, px
+        Sample spacing along the normals.
+    polarity : {"auto", 1, -1}
+        +1 dark membrane on a light background, -1 bright; ``"auto"`` takes the
+        sign with the larger median band contrast.
+    up : tuple of float
+        Search direction ``(dcol, drow)`` for a single point (the normal of a flat membrane).
+    passes : int
+        Snapping passes; each pass after the first searches along the normals of
+        the curve through the points snapped so far.
+    min_snr : float
+        Smallest band contrast, in units of the pixel noise (estimated from the
+        sampled grey levels), that counts as the membrane; points with none stay.
+
+    Returns
+    -------
+    SnapResult
+
+    Notes
+    -----
+    The normals are those of the polyline through the points ordered along the
+    curve (:func:`order_along_curve`); the grey levels along each normal are
+    sampled with :func:`osmobulge.imaging._normals.sample_normals` and the band's
+    sub-pixel midline (half-level crossings of its two edges) is located with
+    :func:`osmobulge.imaging._chamber.band_edges`, the same edge model as the
+    automatic tracer.
+    """
+    if polarity not in POLARITIES:
+        raise ValueError(f"polarity must be one of {POLARITIES}, got {polarity!r}")
+    if not (search > 0 and step > 0 and step < search):
+        raise ValueError(f"search and step must be positive px with step < search, got {search!r}, {step!r}")
+    img = np.asarray(image, dtype=np.float64)
+    if img.ndim != 2:
+        raise ValueError(f"image must be 2-D (H, W), got shape {img.shape}")
+    p = np.asarray(points_rc, float).reshape(-1, 2)
+    if len(p) == 0:
+        return SnapResult(p, np.zeros(0), np.zeros(0, bool), 1 if polarity == "auto" else int(polarity))
+    noise = _pixel_noise(img, p, search)
+    offsets = np.arange(-search, search + 0.5 * step, step)
+    centre = np.full(len(p), int(np.argmin(np.abs(offsets))))
+    pols = (1, -1) if polarity == "auto" else (int(polarity),)
+    current, ok = p, np.zeros(len(p), bool)
+    for _ in range(max(int(passes), 1)):
+        # normals of the curve through the current points: the second pass uses the snapped
+        # points, whose normals are those of the membrane rather than of the clicks' scatter
+        nrm = _normals_rc(current, up)
+        profiles = sample_normals(img, current[:, ::-1], nrm, offsets)
+        results = {}
+        for pol in pols:
+            mid, _, _, contrast, _ = band_edges(profiles, offsets, pol, centre=centre)
+            good = (np.isfinite(mid) & (np.nan_to_num(contrast) > max(min_snr * noise, 0.0))
+                    & (np.abs(np.nan_to_num(mid)) <= search))
+            results[pol] = (mid, good, float(np.median(contrast[good])) if good.any() else -np.inf)
+        pol = max(results, key=lambda k: results[k][2])
+        pols = (pol,)
+        mid, good, _ = results[pol]
+        shifted = current + np.where(good, mid, 0.0)[:, None] * nrm[:, ::-1]
+        # a point that lost the band in a later pass keeps its earlier snap
+        current = np.where(good[:, None], shifted, current)
+        ok |= good
+    snapped = current
+    shift = np.linalg.norm(snapped - p, axis=1)
+    return SnapResult(points_rc=snapped, moved=shift, snapped=ok, polarity=int(pol))

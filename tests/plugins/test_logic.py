@@ -109,3 +109,61 @@ def test_fit_not_crossing_axis_is_falsy():
     far = L.ChamberGeometry(axis_point=(500.0, 300.0))
     fit = L.fit_picked_profile(pts, pixel_size=1e-6, geometry=far)
     assert not fit and "axis" in fit.message
+
+
+# ----------------------------------------------------------------------------- snapping on synthetic frames
+def _segment_distance(points, curve):
+    """Distance of each point to the polyline ``curve`` (both (N, 2))."""
+    a, b = curve[:-1][None], curve[1:][None]
+    p = np.asarray(points)[:, None, :]
+    ab = b - a
+    t = np.clip(np.sum((p - a) * ab, axis=-1) / np.sum(ab * ab, axis=-1), 0, 1)
+    return np.min(np.linalg.norm(a + t[..., None] * ab - p, axis=-1), axis=1)
+
+
+@pytest.fixture(scope="module", params=[1, -1], ids=["dark", "bright"])
+def synthetic_frame(request):
+    from osmobulge.imaging.synthetic import Nuisances, render_series
+
+    s = render_series([1.2], chamber=(100e-6, 60e-6, 10e-6), pixel_size=2e-6, shape=(200, 240), seed=1,
+                      nuisances=Nuisances(noise_sigma=0.01, polarity=request.param))
+    t = s.truth.isel(time=0)
+    col = np.concatenate([t.midline_col.sel(side="left").values[::-1], t.midline_col.sel(side="right").values[1:]])
+    row = np.concatenate([t.midline_row.sel(side="left").values[::-1], t.midline_row.sel(side="right").values[1:]])
+    return s.frames[0], np.c_[row, col], request.param
+
+
+def test_snap_points_lands_on_the_true_midline(synthetic_frame):
+    frame, truth, polarity = synthetic_frame
+    # away from the rim corners, where the dome's band meets the flat band
+    idx = np.linspace(24, len(truth) - 25, 11).astype(int)
+    rng = np.random.default_rng(5)
+    clicked = truth[idx] + rng.uniform(-3, 3, size=(len(idx), 2))
+    clicked = clicked[rng.permutation(len(idx))]  # click order does not matter
+    before = _segment_distance(clicked, truth)
+    res = L.snap_points(frame, clicked)
+    after = _segment_distance(res.points_rc, truth)
+    assert res.polarity == polarity
+    assert res.snapped.all()
+    assert before.max() > 1.5
+    assert after.max() < 0.25, after  # sub-pixel
+    np.testing.assert_allclose(res.moved, np.linalg.norm(res.points_rc - clicked, axis=1), atol=1e-12)
+
+
+def test_snap_points_far_from_any_band_stay(synthetic_frame):
+    frame, truth, _ = synthetic_frame
+    pts = np.array([[20.0, 20.0], [20.0, 40.0], [20.0, 60.0]])  # water only, far above the dome
+    res = L.snap_points(frame, pts, search=3.0)
+    assert not res.snapped.any()
+    np.testing.assert_array_equal(res.points_rc, pts)
+
+
+def test_snap_points_validation():
+    img = np.zeros((10, 10))
+    with pytest.raises(ValueError, match="polarity"):
+        L.snap_points(img, [[1, 1]], polarity=2)
+    with pytest.raises(ValueError, match="search and step"):
+        L.snap_points(img, [[1, 1]], search=1.0, step=2.0)
+    with pytest.raises(ValueError, match="2-D"):
+        L.snap_points(np.zeros((2, 10, 10)), [[1, 1]])
+    assert L.snap_points(img, np.empty((0, 2))).points_rc.shape == (0, 2)
