@@ -836,10 +836,8 @@ def _call_fit(observations, material, model: str, analysis):
     from osmobulge.modeling.fitting import fit_permeability
 
     fam, mech = MODEL_SPECS[model]
-    kwargs = {}
-    if model == "constant_linear":
-        kwargs["volume_ratio_max"] = analysis.linear_window_volume_ratio
-    return fit_permeability(observations, material, model=fam, mechanics=mech, **kwargs)
+    window = {"volume_ratio_max": analysis.linear_window_volume_ratio} if model == "constant_linear" else None
+    return fit_permeability(observations, material, model=fam, mechanics=mech, window=window, errors="raise")
 
 
 def fit_experiment(exp: Experiment, results: Path, *, models=MODELS) -> dict:
@@ -917,27 +915,16 @@ def _fit_summary(js: dict) -> dict:
     return s
 
 
-def _model_curves(fit, observations, material, mechanics, n_fine=200):
-    """Model V/V0 at the data times and on a fine grid, per observation (simulate with the fitted law)."""
+def _model_curves(fit, observations, n_fine=200):
+    """Fitted V/V0 at the data times and on a fine time grid, per observation."""
     import numpy as np
 
-    from osmobulge.modeling.simulate import simulate
-    from osmobulge.modeling.transport import Chamber
-
     at_data, fine = [], []
-    law = fit.permeability
-    for o in observations:
-        ch = Chamber.from_attrs(o.attrs)
+    for i, o in enumerate(observations):
         t = np.asarray(o["time"].values, float)
-        t0 = max(t[0], 0.0)
-        tf = np.linspace(0.0, t[-1], n_fine)
-        grid = np.union1d(np.clip(t, 0.0, None), tf)
-        sim = simulate(ch, material, law, grid, mechanics=mechanics, on_limit="truncate")
-        tv, vv = np.asarray(sim["time"].values), np.asarray(sim["volume_ratio"].values)
-        interp = lambda x, tv=tv, vv=vv: np.interp(x, tv, vv, right=np.nan)  # noqa: E731
-        at_data.append(interp(np.clip(t, 0.0, None)))
-        fine.append((tf, interp(tf)))
-        del t0
+        tf = np.linspace(max(0.0, min(t[0], 0.0)), t[-1], n_fine)
+        at_data.append(np.asarray(fit.curve(i, t), float))
+        fine.append((tf, np.asarray(fit.curve(i, tf), float)))
     return at_data, fine
 
 
@@ -985,17 +972,18 @@ def fit_observations(observations, material, *, models=MODELS, analysis=None, la
         rec: dict = {"ok": False, "family": MODEL_SPECS[model][0], "mechanics": MODEL_SPECS[model][1]}
         try:
             fit = _call_fit(observations, material, model, analysis)
-            params = {k: float(v) for k, v in dict(fit.params).items()}
-            stderr = {k: _finite(v) for k, v in dict(getattr(fit, "stderr", {}) or {}).items()}
-            at_data, fine = _model_curves(fit, observations, material, MODEL_SPECS[model][1])
+            params = {k: float(v) for k, v in fit.params.items() if not k.startswith("ln_")}
+            stderr = {k: _finite(fit.stderr.get(k)) for k in params}
+            at_data, fine = _model_curves(fit, observations)
             resid = v_all - np.concatenate(at_data)
             used = np.isfinite(resid)
             if model == "constant_linear":
                 used &= v_all <= analysis.linear_window_volume_ratio
             rms = float(np.sqrt(np.nanmean(resid[used] ** 2))) if used.any() else None
-            p1 = _finite(fit.permeability(1.0))
-            rec.update(ok=True, params=params, stderr=stderr, P_w1=p1,
-                       P_w1_stderr=_p1_stderr(fit, model, stderr), rms=rms, n_points=int(used.sum()),
+            rel_rms = float(np.sqrt(np.nanmean((resid[used] / v_all[used]) ** 2))) if used.any() else None
+            rec.update(ok=True, params=params, stderr=stderr, P_w1=_finite(fit.p_at_rest),
+                       P_w1_stderr=_finite(fit.p_at_rest_stderr), rms=rms, rel_rms=rel_rms, n_points=int(used.sum()),
+                       redchi=_finite(fit.redchi), nfev=int(fit.nfev), seconds=_finite(fit.elapsed),
                        report=str(fit.report()) if hasattr(fit, "report") else "",
                        summary=_plain(fit.summary()) if hasattr(fit, "summary") else {})
             params_all[model], stderr_all[model] = params, stderr
@@ -1057,9 +1045,8 @@ def fit_observations(observations, material, *, models=MODELS, analysis=None, la
                                    {"units": "1", "long_name": "model V/V0 (fine time grid)"})
         del nf
     if inst_ds is not None:
-        inst_ds = inst_ds.rename({k: f"inst_{k}" for k in list(inst_ds.data_vars) + list(inst_ds.coords)
-                                  if k not in ds and not k.startswith("inst_")})
-        inst_ds = inst_ds.rename_dims({d: f"inst_{d}" for d in inst_ds.dims if not d.startswith("inst_")})
+        names = set(inst_ds.variables) | set(inst_ds.dims)
+        inst_ds = inst_ds.rename({n: f"inst_{n}" for n in names if not str(n).startswith("inst_")})
         inst_ds.attrs = {}
         ds = ds.merge(inst_ds, compat="override")
     ds.attrs.update({"title": f"permeability fits of {label}", "osmobulge_code": code_version(),
@@ -1088,37 +1075,11 @@ def _plain(obj):
     return str(obj)
 
 
-def _p1_stderr(fit, model: str, stderr: dict):
-    """Standard error of P_w(1): the constant's own, or propagated through the covariance of Eqn 27."""
-    import numpy as np
-
-    for attr in ("permeability_stderr", "stderr_at"):
-        f = getattr(fit, attr, None)
-        if callable(f):
-            try:
-                return _finite(f(1.0))
-            except Exception:  # noqa: BLE001
-                break
-    if len(stderr) == 1:
-        return next(iter(stderr.values()))
-    cov = getattr(fit, "covar", None)
-    names = list(dict(fit.params))
-    if cov is None or model != "double_exponential" or not {"c1", "c2", "c3", "c4"} <= set(names):
-        return None
-    p = {k: float(v) for k, v in dict(fit.params).items()}
-    grad = {"c1": np.exp(p["c2"]), "c2": p["c1"] * np.exp(p["c2"]),
-            "c3": np.exp(p["c4"]), "c4": p["c3"] * np.exp(p["c4"])}
-    g = np.array([grad.get(k, 0.0) for k in names])
-    cov = np.asarray(cov, float)
-    if cov.shape != (len(g), len(g)):
-        return None
-    return _finite(np.sqrt(g @ cov @ g))
-
-
 def _fit_warnings(model: str, rec: dict, fit) -> list[str]:
     out = []
-    if rec.get("rms") is not None and rec["rms"] > 0.05:
-        out.append(f"{model}: RMS residual {rec['rms']:.3g} in V/V0 (> 0.05): the model does not follow the data")
+    if rec.get("rel_rms") is not None and rec["rel_rms"] > 0.05:
+        out.append(f"{model}: relative RMS residual {rec['rel_rms'] * 100:.2g} % of V/V0 (> 5 %): the model does "
+                   "not follow the data")
     for k, v in rec.get("stderr", {}).items():
         val = rec["params"].get(k)
         if v is None:

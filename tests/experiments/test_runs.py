@@ -242,6 +242,7 @@ def worker_pipe(tmp_path, monkeypatch):
     monkeypatch.setenv("PYTHONPATH", os.pathsep.join([str(mod_dir), os.environ.get("PYTHONPATH", "")]))
     import importlib
 
+    runs.code_version.cache_clear()  # hash the source now, as the workers will
     return importlib.import_module("obworkerpipe").PIPE
 
 
@@ -270,6 +271,7 @@ def test_process_pool_and_dask_cluster_equal_serial(tmp_path, worker_pipe):
         assert read_state(a)["steps"]["process"]["summary"] == read_state(b)["steps"]["process"]["summary"]
 
 
+@pytest.mark.slow
 def test_worker_death_is_a_failed_experiment(tmp_path, worker_pipe):
     dirs = [_make(tmp_path, f"e{i}", i) for i in range(2)]
     (dirs[0] / "FAIL").write_text("die")  # the worker process exits abruptly
