@@ -586,6 +586,39 @@ def _best_constant(paths, data, masks=None):
     return math.exp(res.x)
 
 
+def _profile_1d(residual, result, probs):
+    """Profile-likelihood limits of a single free parameter with lmfit's F-test."""
+    from scipy.optimize import brentq
+    from scipy.stats import f as f_dist
+
+    name = result.var_names[0]
+    best = result.params[name].value
+    se = result.params[name].stderr
+    pars = result.params.copy()
+    ndata, chi0 = result.ndata, result.chisqr
+
+    def prob(x):
+        pars[name].value = x
+        pars.update_constraints()
+        chi = float(np.sum(residual(pars) ** 2))
+        return f_dist.cdf(max(chi / chi0 - 1.0, 0.0) * (ndata - 1), 1, ndata - 1)
+
+    lims = {}
+    for side in (-1, 1):
+        for sigma, level in probs.items():
+            step = se * sigma
+            x = best + side * step
+            for _ in range(30):  # widen until the level is passed
+                if prob(x) >= level:
+                    break
+                step *= 2.0
+                x = best + side * step
+            lims[(side, sigma)] = brentq(lambda x, lv=level: prob(x) - lv, best, x, xtol=1e-10 * max(abs(best), 1))
+    out = [(probs[2], lims[(-1, 2)]), (probs[1], lims[(-1, 1)]), (0.0, best),
+           (probs[1], lims[(1, 1)]), (probs[2], lims[(1, 2)])]
+    return {name: out}
+
+
 def _starts(family, paths, data, user_params):
     """Starting parameter sets: the user's, the family's ``fit_starts``, its ``guess`` or its hints."""
     if user_params is not None:
@@ -815,7 +848,10 @@ def fit_permeability(observations, material, *, model="constant", mechanics="hyp
             ci[n] = [(probs[2], b - z[2] * se), (probs[1], b - z[1] * se), (0.0, b),
                      (probs[1], b + z[1] * se), (probs[2], b + z[2] * se)]
         if ci_method == "profile":
-            prof = lmfit.conf_interval(minimizer, result, sigmas=list(_SIGMAS))
+            if result.nvarys >= 2:
+                prof = lmfit.conf_interval(minimizer, result, sigmas=list(_SIGMAS))
+            else:  # lmfit needs two free parameters: same F-test profile, by root finding
+                prof = _profile_1d(residual, result, probs)
             for n, lim in prof.items():
                 ci[n] = [(float(pr), float(val)) for pr, val in lim]
     first = paths[0].chamber
