@@ -462,14 +462,15 @@ class Experiment:
     def summary(self) -> dict:
         """JSON-safe metadata (file units, as in the catalog)."""
         c, im = self.chamber, self.imaging
+        r = lambda x: float(f"{x:.12g}")  # noqa: E731 - undo the SI round trip (100e-6 * 1e6 = 99.99999999999999)
         return {
             "name": self.name, "condition": self.condition, "material": self.material_name,
             "date": self.date, "operator": self.operator, "notes": self.notes,
-            "radius_um": c.radius * 1e6, "depth_um": c.depth * 1e6, "membrane_thickness_um": c.thickness * 1e6,
-            "concentration_M": c.concentration / 1e3, "feed_concentration_M": c.feed_concentration / 1e3,
+            "radius_um": r(c.radius * 1e6), "depth_um": r(c.depth * 1e6), "membrane_thickness_um": r(c.thickness * 1e6),
+            "concentration_M": r(c.concentration / 1e3), "feed_concentration_M": r(c.feed_concentration / 1e3),
             "temperature_K": c.temperature,
-            "pixel_size_um": None if im.pixel_size is None else im.pixel_size * 1e6,
-            "frame_interval_min": None if im.frame_interval is None else im.frame_interval / 60.0,
+            "pixel_size_um": None if im.pixel_size is None else r(im.pixel_size * 1e6),
+            "frame_interval_min": None if im.frame_interval is None else r(im.frame_interval / 60.0),
             "bulge_direction": im.bulge_direction,
         }
 
