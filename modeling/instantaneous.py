@@ -124,7 +124,8 @@ def as_observations(observations) -> list:
                 raise ValueError(f"observations[{i}]: dataset has no 'volume_ratio' variable")
             tname = next((n for n in ("time", "t") if n in obs.coords), obs["volume_ratio"].dims[0])
             chamber = Chamber.from_attrs(obs.attrs)
-            label = str(obs.attrs.get("label", obs.attrs.get("chamber_label", f"chamber {i}")))
+            label = next((str(obs.attrs[k]) for k in ("label", "name", "chamber_label") if k in obs.attrs),
+                         f"chamber {i}")
             t, v = obs[tname].values, obs["volume_ratio"].values
         else:
             try:
@@ -186,11 +187,11 @@ def volume_rates(
         a derivative needs at least the smoothing that suits the function
         itself.  A number is used as :math:`\lambda`.
     edge_window : int
-        ``"spline"``: the first and last ``edge_window // 2`` rates come from a
-        cubic (:data:`EDGE_ORDER`) fitted to the first (last) ``edge_window`` samples of
-        :math:`\ln(V/V_0)` instead of the spline, whose natural end conditions
-        bias the derivative where the curve bends most (the start, which fixes
-        :math:`P_w(\bar\lambda \to 1)`); 0 disables.
+        ``"spline"``: the first ``edge_window // 2`` rates come from a cubic
+        (:data:`EDGE_ORDER`) fitted to the first ``edge_window`` samples of
+        :math:`\ln(V/V_0)` instead of the spline, whose natural end condition
+        biases the derivative at the start, where the curve bends most and
+        which alone fixes :math:`P_w(\bar\lambda \to 1)`; 0 disables.
 
     Returns
     -------
@@ -259,11 +260,12 @@ def volume_rates(
                 f"edge_window must be 0 or in [{EDGE_ORDER + 2}, {x.size}] samples, got {edge_window!r}")
         # smoothing splines are biased at the ends (natural boundary conditions): use a
         # local cubic there, which has no such bias (local polynomial regression)
+        # at the start, where ln V bends most and which alone fixes P_w(lambda_bar -> 1); at the
+        # end the curve is straighter and a local polynomial would only add variance
         h = ew // 2
-        for sl, ends in ((slice(0, ew), slice(0, h)), (slice(x.size - ew, x.size), slice(x.size - h, x.size))):
-            c = np.polyfit(x[sl], y[sl], EDGE_ORDER)
-            lnv[ends] = np.polyval(c, x[ends])
-            dlnv[ends] = np.polyval(np.polyder(c), x[ends])
+        c = np.polyfit(x[:ew], y[:ew], EDGE_ORDER)
+        lnv[:h] = np.polyval(c, x[:h])
+        dlnv[:h] = np.polyval(np.polyder(c), x[:h])
     vs = np.exp(lnv)
     rate = vs * dlnv / _HOUR
     return t.copy(), vs, rate

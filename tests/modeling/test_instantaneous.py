@@ -50,9 +50,10 @@ def test_rates_of_a_smooth_curve(method):
     te, ve, rate = volume_rates(t, v, method=method)
     truth = (0.5 + 0.1 * te / 3600.0) / 3600.0
     # bins and a quadratic Savitzky-Golay are exact for a quadratic; the spline of ln V nearly so
-    # (its end rates come from local cubics of ln V, good to a few 1e-3)
-    tol = 3e-3 if method == "spline" else 1e-9
+    # (its first rates come from a local cubic of ln V; the last one carries the natural end condition)
+    tol = 5e-3 if method == "spline" else 1e-9
     np.testing.assert_allclose(rate, truth, rtol=tol)
+    np.testing.assert_allclose(rate[3:-3], truth[3:-3], rtol=tol / 5)
     np.testing.assert_allclose(ve, 1.0 + 0.5 * te / 3600 + 0.05 * (te / 3600) ** 2, rtol=tol)
 
 
