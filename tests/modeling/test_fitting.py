@@ -56,11 +56,11 @@ def test_double_exponential_round_trip(request, truth_name, material, law):
     truth = request.getfixturevalue(truth_name)
     fit = fit_permeability(noisy(truth, seed=0), material, model="double_exponential")
     assert fit.success and fit
-    assert fit.p_at_rest == pytest.approx(law(1.0), rel=0.03)
+    assert fit.p_at_rest == pytest.approx(law(1.0), rel=0.03, abs=0)
     assert abs(fit.p_at_rest - law(1.0)) < 3 * fit.p_at_rest_stderr
     # the fitted curves sit inside the 1 % noise, and the residuals are the noise
     assert curve_error(fit, truth) < 0.3 * NOISE
-    assert math.sqrt(fit.redchi) == pytest.approx(NOISE, rel=0.2)
+    assert math.sqrt(fit.redchi) == pytest.approx(NOISE, rel=0.2, abs=0)
     # the whole law, over the stretches the data span
     lam = np.linspace(1.0, 3.0, 9)
     np.testing.assert_allclose(fit.permeability(lam), law(lam), rtol=0.1)
@@ -70,16 +70,18 @@ def test_double_exponential_round_trip(request, truth_name, material, law):
 @pytest.mark.slow
 def test_reported_uncertainty_covers_truth(pdms_truth):
     truth = DoubleExponential.PDMS(1.0)
-    inside1 = inside2 = 0
+    inside1 = inside2 = within3 = 0
     for seed in range(20):
         fit = fit_permeability(noisy(pdms_truth, seed=100 + seed), PDMS, model="double_exponential")
         z = abs(fit.p_at_rest - truth) / fit.p_at_rest_stderr
         inside1 += z <= 1
         inside2 += z <= 2
-        assert fit.p_at_rest == pytest.approx(truth, rel=0.03)
-    # nominal 68 % and 95 %: demand at least 10/20 and 17/20
+        within3 += abs(fit.p_at_rest / truth - 1) <= 0.03
+    # nominal 68 % and 95 %: demand at least 10/20 and 17/20 (measured: 12 and 19)
     assert inside1 >= 10, inside1
     assert inside2 >= 17, inside2
+    # the standard error is ~1.1 % of P_w(1), so 3 % is ~2.6 sigma: nearly all seeds
+    assert within3 >= 18, within3
 
 
 def test_constant_fits_on_table3_data_follow_the_paper_pattern(pdms_truth):
@@ -87,7 +89,7 @@ def test_constant_fits_on_table3_data_follow_the_paper_pattern(pdms_truth):
     linear = fit_permeability(data, PDMS, mechanics="linear", window={"volume_ratio_max": 1.3})
     hyper = fit_permeability(data, PDMS)
     # the small-deflection linear fit sees the unstretched membrane ...
-    assert linear.params["p"] == pytest.approx(DoubleExponential.PDMS(1.0), rel=0.1)
+    assert linear.params["p"] == pytest.approx(DoubleExponential.PDMS(1.0), rel=0.1, abs=0)
     assert all(np.all(o.volume_ratio <= 1.3) for o in linear.observations)
     # ... the all-data hyperelastic constant fit a much lower average (paper: 58 % lower)
     assert 0.3 < hyper.params["p"] / linear.params["p"] < 0.6
@@ -101,19 +103,19 @@ def test_constant_round_trip_exact_on_noiseless_data():
     for mech in ("linear", "hyperelastic"):
         ds = simulate(c, PDMS, 1.3e-12, t, mechanics=mech)
         fit = fit_permeability([ds], PDMS, mechanics=mech, n_grid=1201)
-        assert fit.params["p"] == pytest.approx(1.3e-12, rel=1e-6)
+        assert fit.params["p"] == pytest.approx(1.3e-12, rel=1e-6, abs=0)
 
 
 def test_firpo_round_trip():
     law = Firpo.through(1.99e-12, thickness=20e-6, critical_thickness=10e-6)
     truth = [simulate(paper_chamber(n), PDMS, law, T) for n in ("reference", "small_radius", "low_concentration")]
     fit = fit_permeability(noisy(truth, seed=2), PDMS, model="firpo")
-    assert fit.p_at_rest == pytest.approx(1.99e-12, rel=0.03)
-    assert fit.params["critical_thickness"] == pytest.approx(10e-6, rel=0.2)
+    assert fit.p_at_rest == pytest.approx(1.99e-12, rel=0.03, abs=0)
+    assert fit.params["critical_thickness"] == pytest.approx(10e-6, rel=0.2, abs=0)
     assert curve_error(fit, truth) < 0.3 * NOISE
     with pytest.raises(ValueError, match="thickness"):
         fit.permeability(1.0)
-    assert fit.permeability(1.0, thickness=20e-6) == pytest.approx(fit.p_at_rest)
+    assert fit.permeability(1.0, thickness=20e-6) == pytest.approx(fit.p_at_rest, rel=1e-6, abs=0)
 
 
 # -- results -------------------------------------------------------------------------
@@ -124,7 +126,7 @@ def test_result_report_summary_dataset(pdms_truth):
         assert part in text
     summ = fit.summary()
     json.dumps(summ, allow_nan=False)
-    assert summ["params"]["p_at_rest"]["value"] == pytest.approx(fit.p_at_rest)
+    assert summ["params"]["p_at_rest"]["value"] == pytest.approx(fit.p_at_rest, rel=1e-6, abs=0)
     assert len(summ["chambers"]) == 4 and summ["chambers"][1]["chamber_radius"] == 100e-6
     ds = fit.to_dataset()
     assert ds.sizes["point"] == 4 * T.size and ds.sizes["chamber"] == 4
@@ -134,9 +136,9 @@ def test_result_report_summary_dataset(pdms_truth):
     # covariance-based intervals: best +- 1.96... sigma, ordered
     lo2, lo1, best, hi1, hi2 = (v for _, v in fit.ci["p_at_rest"])
     assert lo2 < lo1 < best < hi1 < hi2
-    assert hi1 - best == pytest.approx(fit.stderr["p_at_rest"], rel=1e-9)
+    assert hi1 - best == pytest.approx(fit.stderr["p_at_rest"], rel=1e-9, abs=0)
     # the stretch-law uncertainty by the delta method agrees with lmfit's propagation at rest
-    assert fit.permeability_stderr(1.0) == pytest.approx(fit.stderr["p_at_rest"], rel=1e-3)
+    assert fit.permeability_stderr(1.0) == pytest.approx(fit.stderr["p_at_rest"], rel=1e-3, abs=0)
     # fitted curve at arbitrary times matches the stored one
     np.testing.assert_allclose(fit.curve(0, T), fit.observations[0].fitted, rtol=1e-12)
 
@@ -191,7 +193,7 @@ def test_nan_and_non_monotone_times():
         fit_permeability([(c, t, v_nan)], PDMS)
     fit = fit_permeability([(c, t, v_nan)], PDMS, nan_policy="omit", n_grid=1201)
     assert fit.observations[0].n_dropped == 1 and fit.ndata == 29
-    assert fit.params["p"] == pytest.approx(2e-12, rel=1e-6)
+    assert fit.params["p"] == pytest.approx(2e-12, rel=1e-6, abs=0)
     t_bad = t.copy()
     t_bad[10] = t_bad[8]
     with pytest.raises(ValueError, match=r"strictly increasing; t\[10\]"):
@@ -267,5 +269,5 @@ def test_registered_family_round_trip():
 
     truth = [simulate(paper_chamber(n), PDMS, law, T) for n in ("reference", "small_radius")]
     fit = fit_permeability(noisy(truth, seed=6), PDMS, model="single_exponential_test")
-    assert fit.params["p0"] == pytest.approx(2e-12, rel=0.03)
+    assert fit.params["p0"] == pytest.approx(2e-12, rel=0.03, abs=0)
     assert fit.params["k"] == pytest.approx(-0.8, abs=0.05)
