@@ -168,3 +168,24 @@ def test_path_reuses_grid_across_permeabilities():
         np.testing.assert_allclose(path.volume_ratio(DAY, p), direct, rtol=2e-6)
     # a constant permeability only rescales time: v(t; 2P) = v(2t; P)
     np.testing.assert_allclose(path.volume_ratio(DAY, 2e-12), path.volume_ratio(2 * DAY, 1e-12), rtol=1e-12)
+
+
+def test_errata_eqn25_eqn63_instantaneous_mobility():
+    # Eqn 8 solved for L at each instant must give back the permeability that generated the rate:
+    # L = -(dv/dt) l0 V0 / (A0 Pi0) / (f_A f_l) / (1/(V/V0) - C_feed/C0 + E f_p / Pi0)   (dividing)
+    from osmobulge.modeling.transport import mobility
+
+    c = paper_chamber()
+    ds = simulate(c, PDMS, DoubleExponential.PDMS, [0.0, 6 * 3600.0, 12 * 3600.0, 86400.0])
+    geometric = -c.thickness * c.volume / (c.area * c.osmotic_potential) / (ds.area_ratio * ds.inverse_thickness)
+    bracket = 1 / ds.volume_ratio + ds.turgor_pressure / c.osmotic_potential
+    np.testing.assert_allclose(bracket, ds.driving_force, rtol=1e-12)
+    right = ds.volume_rate * geometric / bracket
+    np.testing.assert_allclose(right, mobility(ds.permeability), rtol=1e-9)
+    # supp. Eqn 63 multiplies by the bracket: off by bracket**2 (0.166 at 6 h, 0.0052 at 24 h)
+    printed_63 = ds.volume_rate * geometric * bracket
+    np.testing.assert_allclose(printed_63 / right, bracket**2, rtol=1e-12)
+    assert float(bracket[-1] ** 2) == pytest.approx(0.00523, rel=1e-2, abs=0)
+    # main Eqn 25 as printed, 1/V0 with V0 in m^3 (1.4e-11): 1/V0 dwarfs E f_p / Pi0 and L comes out ~1e-11 x
+    printed_25 = ds.volume_rate * geometric / (1 / c.volume + ds.turgor_pressure / c.osmotic_potential)
+    assert np.all(printed_25[1:] / right[1:] < 1e-9)

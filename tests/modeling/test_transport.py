@@ -223,3 +223,19 @@ def test_lmfit_models_recover_table3_and_firpo():
     cm = perm.ConstantPermeabilityModel()
     assert isinstance(cm, lmfit.Model)
     assert cm.guess(np.array([1e-12, 2e-12, 3e-12]))["p"].value == pytest.approx(2e-12, rel=1e-14, abs=0)
+
+
+def test_errata_small_deflection_window_stretch():
+    # Sec. 3.6.1 / supp. Sec. 7.1: "Vtilde < 0.165; V/V0 < 1.3 ... an approximate biaxial stretch of 1.4".
+    # Both mechanics give lambda_bar = sqrt(A/A0) ~ 1.05 there; 1.4 is reached only at V/V0 ~ 1.9-2.2.
+    c = tr.paper_chamber()
+    hyper, lin = tr.mechanics_model(PDMS), tr.mechanics_model(PDMS, mechanics="linear")
+    vt = c.vtilde(1.3)
+    assert hyper.lambda_bar(vt) == pytest.approx(1.0498, rel=1e-3, abs=0)
+    assert lin.lambda_bar(vt) == pytest.approx(math.sqrt(1 + 4 * 0.165**2), rel=1e-12, abs=0)
+    from scipy.optimize import brentq
+
+    vt14 = brentq(lambda x: hyper.lambda_bar(x) - 1.4, 0.01, 5.0)
+    assert c.volume_ratio(vt14) == pytest.approx(2.174, rel=2e-3, abs=0)
+    # Sec. 3.3: "Vtilde < 0.05 ... lambda_bar ~ 1.2": it is 1.005
+    assert hyper.lambda_bar(0.05) == pytest.approx(1.005, rel=1e-3, abs=0)
