@@ -250,3 +250,84 @@ def test_locking_volume_matches_pressure_extrapolation(law):
     inv_p = [1.0 / col.solve_collocation(law, v)["pressure"] for v in vv]
     slope, intercept = np.polyfit(vv, inv_p, 1)
     assert -intercept / slope == pytest.approx(v_lock, rel=2e-5)
+
+
+# --------------------------------------------------------------------------------------
+# numbers quoted in docs/paper-errata.md (Mechanics)
+# --------------------------------------------------------------------------------------
+def _printed_energy(law, l1, l2):
+    """Gent 3-parameter W with the invariants as printed in main Eqns 15-16 (errata E1)."""
+    j1 = l1**2 + l2**2 + 1.0 / (l1 * l2) - 3.0
+    j2 = l1**-2 + l2**-2 + 1.0 / (l1 * l2) - 3.0
+    return -law.c1 * law.jm * np.log(1.0 - j1 / law.jm) + law.c2 * np.log((j2 + 3.0) / 3.0)
+
+
+@pytest.mark.parametrize(("law", "expected_pa"), [(PDMS, 1.9e3), (PEO_PDMS, 17.8e3)], ids=["PDMS", "PEO_PDMS"])
+def test_errata_e1_printed_invariants_stress_the_rest_state(law, expected_pa):
+    h = 1e-6
+    dw = (_printed_energy(law, 1 + h, 1.0) - _printed_energy(law, 1 - h, 1.0)) / (2 * h)
+    assert dw == pytest.approx(law.c1 - law.c2, rel=1e-6)  # T_xi / l0 = dW/dl1 / l2 at rest
+    assert dw == pytest.approx(expected_pa, rel=1e-6)
+    assert np.allclose(law.membrane_tensions(1.0, 1.0), 0.0, atol=1e-9 * law.c1)
+
+
+def test_errata_e2_printed_volume_integrand_undercounts():
+    printed = []
+    for vtilde in (0.5, 2.0, 5.0):
+        prof = bulge_profile(PDMS, vtilde, n=2001)
+        rho, lphi, z = prof.rho.values, prof.lambda_phi.values, prof.z.values
+        printed.append(_gauss_integral(rho, (lphi, z), lambda s, t: -s[0](t) * t * t * s[1](t, 1)))
+    np.testing.assert_allclose(printed, [0.429, 1.10, 2.12], rtol=3e-3)
+
+
+def test_errata_e3_cap_area_is_one_plus_four_v_squared():
+    from osmobulge.modeling.linear import linear_area_ratio
+
+    v = np.array([1e-4, 1e-3, 1e-2])
+    # exact spherical cap of volume pi a^3 V: h^3 + 3 h - 6 V = 0 (a = 1), area ratio 1 + h^2
+    h = np.array(
+        [
+            np.roots([1.0, 0.0, 3.0, -6.0 * x])[np.argmin(np.abs(np.roots([1.0, 0.0, 3.0, -6.0 * x]).imag))].real
+            for x in v
+        ]
+    )
+    exact = 1.0 + h * h
+    np.testing.assert_allclose((exact - 1.0) / v**2, 4.0, rtol=2e-3)
+    np.testing.assert_allclose(linear_area_ratio(v), 1.0 + 4.0 * v**2, rtol=1e-15)
+    # the printed 1 + 4 pi V^2 overstates the area increase by pi
+    assert np.all(np.abs((1.0 + 4.0 * np.pi * v**2 - 1.0) / (exact - 1.0) - np.pi) < 0.01)
+
+
+def test_errata_e4_moduli():
+    assert PDMS.youngs_modulus / 1e6 == pytest.approx(0.249, abs=5e-4)
+    assert PEO_PDMS.youngs_modulus / 1e6 == pytest.approx(0.536, abs=5e-4)
+    assert 6 * (PDMS.c1 + PDMS.c2) / 1e6 == pytest.approx(0.368, abs=5e-4)
+    assert 6 * (PEO_PDMS.c1 + PEO_PDMS.c2) / 1e6 == pytest.approx(0.750, abs=5e-4)
+    assert round(6 * (PDMS.c1 + PDMS.c2) / 1e6, 2) == PDMS.E / 1e6
+    assert round(6 * (PEO_PDMS.c1 + PEO_PDMS.c2) / 1e6, 2) == PEO_PDMS.E / 1e6
+
+
+def _printed_uniaxial(law, lam):
+    """Supplement Eqn 61 as printed (errata E5)."""
+    j1 = lam**2 + 2.0 / lam - 3.0
+    j2 = 2.0 * lam + lam**-2 - 3.0
+    c1, c2, jm = law.c1, law.c2, law.jm
+    return (c1 * jm * lam**2 / (jm - j1) - 2.0 * c2 * lam**-2 / (j2 + 3.0) - 2.0 * (c1 - c2 / 3.0)) / lam
+
+
+@pytest.mark.parametrize(
+    ("law", "printed_kpa", "right_kpa"),
+    [
+        (PDMS, [-31.6, 14.4, 45.0, 112.7], [0.0, 80.4, 132.0, 254.9]),
+        (PEO_PDMS, [-71.4, 27.9, 92.8, 215.1], [0.0, 174.6, 283.6, 501.2]),
+    ],
+    ids=["PDMS", "PEO_PDMS"],
+)
+def test_errata_e5_printed_uniaxial_stress(law, printed_kpa, right_kpa):
+    lam = np.array([1.0, 1.5, 2.0, 3.0])
+    np.testing.assert_allclose(_printed_uniaxial(law, lam) / 1e3, printed_kpa, atol=0.05)
+    np.testing.assert_allclose(law.uniaxial_stress(lam) / 1e3, right_kpa, atol=0.05)
+    # the right form is dW/dlambda along the uniaxial path (independent finite difference)
+    h = 1e-6
+    fd = (law.strain_energy(lam + h, (lam + h) ** -0.5) - law.strain_energy(lam - h, (lam - h) ** -0.5)) / (2 * h)
+    np.testing.assert_allclose(law.uniaxial_stress(lam), fd, rtol=1e-6, atol=1e-6 * law.c1)
