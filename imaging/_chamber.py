@@ -1,0 +1,581 @@
+"""Find the chamber in a cross-section micrograph: orientation, flat membrane line, wells, walls, rim.
+
+Works in the *bulge-up view* of a frame: the frame rotated by a multiple of
+90 degrees so the dome grows towards row 0.  Points are ``(x=col, y=row)`` in
+pixels of that view, the pixel ``(row, col)`` centred on ``(x=col, y=row)``.
+No image is copied for the rotation: :class:`FrameView` maps sample
+coordinates back to the stored frame.
+
+The flat-membrane *line* is the midline of the membrane band lying on the
+base's top surface (the rim plane, ``z = 0``); the base's top surface is half
+a band thickness below it.  Chamber coordinates: ``u`` along the line
+(positive to the right in the view) from the chamber axis, ``z`` up (bulge
+direction) from the line.
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass, replace
+
+import numpy as np
+from scipy import ndimage as ndi
+
+__all__ = ["FrameView", "Line", "Well", "ChamberGeometry", "ROTATIONS", "detect_orientation", "find_chambers",
+           "measure_line", "measure_walls", "band_edges", "step_crossing"]
+
+#: np.rot90 count that turns each bulge direction into "up"
+ROTATIONS = {"up": 0, "right": 1, "down": 2, "left": 3}
+
+
+class FrameView:
+    """A frame seen rotated by ``k`` quarter turns (``np.rot90(frame, k)``) without copying it.
+
+    Parameters
+    ----------
+    frame : ndarray of shape (H, W)
+        Any numeric dtype.
+    k : int
+        Quarter turns counter-clockwise (0..3).
+    """
+
+    def __init__(self, frame, k=0):
+        self.frame = frame
+        self.k = int(k) % 4
+        h, w = frame.shape
+        self.shape = (h, w) if self.k % 2 == 0 else (w, h)
+
+    def to_frame(self, x, y):
+        """View ``(x, y)`` -> stored frame ``(row, col)``."""
+        h, w = self.frame.shape
+        if self.k == 0:
+            return y, x
+        if self.k == 1:
+            return x, w - 1 - y
+        if self.k == 2:
+            return h - 1 - y, w - 1 - x
+        return h - 1 - x, y
+
+    def from_frame(self, row, col):
+        """Stored frame ``(row, col)`` -> view ``(x, y)``."""
+        h, w = self.frame.shape
+        if self.k == 0:
+            return col, row
+        if self.k == 1:
+            return row, w - 1 - col
+        if self.k == 2:
+            return w - 1 - col, h - 1 - row
+        return h - 1 - row, col
+
+    def sample(self, x, y):
+        """Bilinear samples at view points (arrays of any equal shape); nan outside."""
+        x = np.asarray(x, float)
+        y = np.asarray(y, float)
+        r, c = self.to_frame(x, y)
+        out = ndi.map_coordinates(self.frame, [np.ravel(r), np.ravel(c)], order=1, mode="constant", cval=np.nan,
+                                  output=np.float64, prefilter=False)
+        return out.reshape(x.shape)
+
+    def patch(self, r0, r1, c0, c1, dtype=np.float32):
+        """Dense copy of view rows r0:r1, cols c0:c1 (clipped to the view)."""
+        h, w = self.shape
+        r0, r1, c0, c1 = max(int(r0), 0), min(int(r1), h), max(int(c0), 0), min(int(c1), w)
+        return np.asarray(np.rot90(self.frame, self.k)[r0:r1, c0:c1], dtype), (r0, c0)
+
+
+@dataclass(frozen=True)
+class Line:
+    """The flat-membrane midline: ``p(u) = point + u * direction`` in view pixels."""
+
+    x0: float
+    y0: float
+    angle: float  # rad, direction (cos, sin) in (x, y)
+
+    @property
+    def direction(self):
+        return np.array([np.cos(self.angle), np.sin(self.angle)])
+
+    @property
+    def normal(self):
+        """Unit normal pointing up (bulge side, towards row 0 for angle 0)."""
+        return np.array([np.sin(self.angle), -np.cos(self.angle)])
+
+    def point(self, u, z=0.0):
+        """View points at line coordinate ``u`` and height ``z`` (arrays broadcast), shape (..., 2)."""
+        u = np.asarray(u, float)
+        z = np.asarray(z, float)
+        d, n = self.direction, self.normal
+        return np.stack([self.x0 + u * d[0] + z * n[0], self.y0 + u * d[1] + z * n[1]], axis=-1)
+
+    def coords(self, pts):
+        """View points (N, 2) -> (u, z)."""
+        p = np.asarray(pts, float) - (self.x0, self.y0)
+        return p @ self.direction, p @ self.normal
+
+    def shifted(self, du=0.0, dz=0.0):
+        """Same line with its origin moved by ``du`` along and ``dz`` across it."""
+        x, y = self.point(du, dz)
+        return Line(float(x), float(y), self.angle)
+
+
+@dataclass(frozen=True)
+class Well:
+    """A well in line coordinates: wall tops ``u_left < u_right`` at the base's top surface."""
+
+    u_left: float
+    u_right: float
+    slope_left: float = 0.0  # du/dz of the wall (z up, z < 0 in the well)
+    slope_right: float = 0.0
+    depth: float = np.nan  # px, from the base's top surface to the bottom
+
+    @property
+    def centre(self):
+        return 0.5 * (self.u_left + self.u_right)
+
+    @property
+    def half_width(self):
+        return 0.5 * (self.u_right - self.u_left)
+
+
+@dataclass(frozen=True)
+class ChamberGeometry:
+    """Geometry of one chamber in one frame (view pixels).
+
+    ``line`` has its origin on the chamber axis (``u = 0``).
+    """
+
+    line: Line
+    thickness: float  # px, membrane band on the surface
+    polarity: int  # +1 dark membrane, -1 bright
+    rim_radius: float  # px
+    well: Well  # in the line coordinates (centred: u_left = -rim_radius)
+    others: tuple = ()  # other wells (line coordinates)
+    contrast: float = np.nan  # band contrast (grey levels)
+    line_rms: float = np.nan  # px, scatter of the band points about the line
+    wall_rms: float = np.nan  # px
+
+    @property
+    def axis_point(self):
+        return np.array([self.line.x0, self.line.y0])
+
+
+# ---------------------------------------------------------------------------------- 1-D helpers
+def _nanmedian(a, **kw):
+    """``np.nanmedian`` without the all-nan warning (returns nan there)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        return np.nanmedian(a, **kw)
+
+
+def _take(a, idx):
+    return np.take_along_axis(a, np.clip(idx, 0, a.shape[1] - 1)[:, None], axis=1)[:, 0]
+
+
+def _crossing(q, offsets, level, start, direction):
+    """First crossing of ``level`` walking from ``start`` in ``direction`` (+1/-1); nan if none."""
+    n, k = q.shape
+    cols = np.arange(k)[None, :]
+    below = q < level[:, None]
+    if direction > 0:
+        cand = np.where(below & (cols > start[:, None]), cols, k)
+        j = cand.min(axis=1)
+        ok = j < k
+        j0, j1 = np.clip(j - 1, 0, k - 1), np.clip(j, 0, k - 1)
+    else:
+        cand = np.where(below & (cols < start[:, None]), cols, -1)
+        j = cand.max(axis=1)
+        ok = j >= 0
+        j0, j1 = np.clip(j + 1, 0, k - 1), np.clip(j, 0, k - 1)
+    q0, q1 = _take(q, j0), _take(q, j1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        t = np.clip((q0 - level) / (q0 - q1), 0.0, 1.0)
+    out = offsets[j0] + t * (offsets[j1] - offsets[j0])
+    out[~ok] = np.nan
+    return out
+
+
+def band_edges(profiles, offsets, polarity, *, centre=None, search=None, side=4):
+    """Sub-pixel edges, midline and contrast of the membrane band in each profile.
+
+    The band is the extreme (dark for ``polarity=+1``) run of each profile;
+    each edge lies where the profile crosses half-way between the band's
+    peak and the level on that side, so the midline is unbiased by a
+    symmetric blur and by different levels on the two sides (base below,
+    water above).
+
+    Parameters
+    ----------
+    profiles : ndarray of shape (N, K)
+        Grey levels along N transects (evenly spaced ``offsets``).
+    offsets : ndarray of shape (K,)
+        Sample positions along the transects (px).
+    polarity : int
+        +1 dark band, -1 bright band.
+    centre : ndarray of shape (N,), optional
+        Index near the band (default: the peak of the whole profile).
+    search : int or ndarray of int, shape (N,), optional
+        Half-width (samples) around ``centre`` to look for the peak.
+    side : int
+        Samples at each end of the profile averaged for the side levels.
+
+    Returns
+    -------
+    mid, lo, hi, contrast, width : ndarray of shape (N,)
+        Midline offset, edge offsets (lower and higher offset side), peak
+        contrast over the mean side level, and band width (px); nan when an
+        edge is not found.
+    """
+    q = polarity * -np.asarray(profiles, float)
+    n, k = q.shape
+    if not np.all(np.isfinite(q)):
+        fill = _nanmedian(q, axis=1, keepdims=True) if n else 0.0
+        q = np.where(np.isfinite(q), q, np.nan_to_num(fill, nan=0.0))
+    cols = np.arange(k)
+    if centre is None:
+        ipk = np.argmax(q, axis=1)
+    else:
+        c = np.asarray(centre, int)
+        s = np.full(n, k) if search is None else np.broadcast_to(np.asarray(search), (n,)).astype(int)
+        win = np.abs(cols[None, :] - c[:, None]) <= s[:, None]
+        ipk = np.argmax(np.where(win, q, -np.inf), axis=1)
+    peak = _take(q, ipk)
+    left = np.median(q[:, :side], axis=1)
+    right = np.median(q[:, -side:], axis=1)
+    lo = _crossing(q, offsets, 0.5 * (peak + left), ipk, -1)
+    hi = _crossing(q, offsets, 0.5 * (peak + right), ipk, +1)
+    return 0.5 * (lo + hi), lo, hi, peak - 0.5 * (left + right), hi - lo
+
+
+def step_crossing(profiles, offsets, *, side=4):
+    """Sub-pixel position of a step edge (mid-level crossing nearest the profile centre).
+
+    Parameters
+    ----------
+    profiles : ndarray of shape (N, K)
+        Grey levels across the edge.
+    offsets : ndarray of shape (K,)
+        Sample positions (px).
+    side : int
+        Samples averaged at each end for the two levels.
+
+    Returns
+    -------
+    pos, step : ndarray of shape (N,)
+        Edge offset (nan if no crossing) and signed step (last level - first level).
+    """
+    q = np.asarray(profiles, float)
+    n, k = q.shape
+    a = np.median(q[:, :side], axis=1)
+    b = np.median(q[:, -side:], axis=1)
+    lev = 0.5 * (a + b)
+    s = q > lev[:, None]
+    ch = s[:, :-1] != s[:, 1:]
+    j = np.arange(k - 1)[None, :]
+    dist = np.where(ch, np.abs(j + 0.5 - (k - 1) / 2.0), np.inf)
+    jj = np.argmin(dist, axis=1)
+    ok = np.isfinite(dist[np.arange(n), jj])
+    q0, q1 = _take(q, jj), _take(q, jj + 1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        t = np.clip((lev - q0) / (q1 - q0), 0.0, 1.0)
+    pos = offsets[jj] + t * (offsets[np.minimum(jj + 1, k - 1)] - offsets[jj])
+    pos[~ok] = np.nan
+    return pos, b - a
+
+
+def _robust_line(x, y, *, iters=4, clip=3.0, floor=0.1):
+    """Least-squares line y = a + b x with sigma clipping (at least ``floor``); returns a, b, rms, inliers."""
+    ok = np.isfinite(x) & np.isfinite(y)
+    a = b = np.nan
+    rms = np.nan
+    for _ in range(iters):
+        if ok.sum() < 2:
+            break
+        b, a = np.polyfit(x[ok], y[ok], 1)
+        res = y - (a + b * x)
+        mad = 1.4826 * np.median(np.abs(res[ok] - np.median(res[ok])))
+        rms = float(np.sqrt(np.mean(res[ok] ** 2)))
+        new = np.isfinite(res) & (np.abs(res) <= max(clip * mad, floor))
+        if np.array_equal(new, ok) or new.sum() < 2:
+            break
+        ok = new
+    return a, b, rms, ok
+
+
+# ---------------------------------------------------------------------------------- orientation
+def _ridge_rows(img, w_max=8):
+    """Per column: row and signed value of the strongest ridge (band) response over widths 1..w_max."""
+    best = np.zeros(img.shape, np.float32)
+    for w in range(1, w_max + 1):
+        up = np.roll(img, w, axis=0)
+        dn = np.roll(img, -w, axis=0)
+        r = 0.5 * (up + dn) - img  # > 0 for a dark ridge
+        r[:w] = 0
+        r[-w:] = 0
+        # a step gives |r| = step/2 on one side only; require both sides to agree in sign
+        both = np.sign(up - img) == np.sign(dn - img)
+        r = np.where(both, r, 0)
+        best = np.where(np.abs(r) > np.abs(best), r, best)
+    rows = np.argmax(np.abs(best), axis=0)
+    return rows, best[rows, np.arange(img.shape[1])]
+
+
+def _coarse(frame, f):
+    h, w = frame.shape
+    h2, w2 = h // f * f, w // f * f
+    return np.asarray(frame[:h2, :w2], np.float32).reshape(h2 // f, f, w2 // f, f).mean(axis=(1, 3))
+
+
+def detect_orientation(frame):
+    """Bulge direction of a (flat-membrane) frame: the side of the straight membrane band away from the wells.
+
+    Parameters
+    ----------
+    frame : ndarray of shape (H, W)
+        A frame, ideally the first (flat membrane) of a series.
+
+    Returns
+    -------
+    direction : str
+        One of ``"up", "down", "left", "right"``.
+    score : float
+        Ratio of the well-wall evidence on the base side to the other side (> 1).
+    """
+    f = max(1, min(frame.shape) // 256)
+    img = ndi.gaussian_filter(_coarse(frame, f), 1.0)
+    best = None
+    for k in (0, 1):  # band horizontal in the view rotated by k
+        v = np.rot90(img, k)
+        rows, val = _ridge_rows(v)
+        cols = np.arange(v.shape[1])
+        a, b, rms, ok = _robust_line(cols.astype(float), rows.astype(float), floor=1.5)
+        strength = float(np.median(np.abs(val[ok]))) * ok.mean() if np.isfinite(a) else 0.0
+        if best is None or strength > best[0]:
+            best = (strength, k, a, b, float(np.sign(np.median(val[ok]))) if np.isfinite(a) else 1.0)
+    _, k, a, b, pol = best
+    v = np.rot90(img, k)
+    h, w = v.shape
+    cols = np.arange(w)
+    line_rows = a + b * cols
+    gx = ndi.sobel(v, axis=1)
+
+    def wall_score(sign):
+        # median over a strip of rows beside the band of the horizontal gradient: walls are
+        # vertical edges crossing the whole strip; dust is local and drops out of the median
+        offs = np.arange(4, 4 + max(6, h // 24))
+        rr = np.clip(np.round(line_rows[None, :] + sign * offs[:, None]).astype(int), 0, h - 1)
+        strip = gx[rr, cols[None, :]]
+        med = np.abs(np.median(strip, axis=0))
+        return float(np.sort(med)[-max(4, w // 64):].mean())
+
+    below, above = wall_score(+1), wall_score(-1)
+    base_below = below >= above
+    if k == 0:
+        direction = "up" if base_below else "down"
+    else:  # view = rot90(frame, 1): view "up" is frame "right"
+        direction = "right" if base_below else "left"
+    score = max(below, above) / max(min(below, above), 1e-12)
+    del pol
+    return direction, score
+
+
+# ---------------------------------------------------------------------------------- chamber finding
+def _transects(view, line, u, z0, z1, step=0.5, along=False):
+    """Samples along transects across (default) or along the line: returns (N, K) and offsets."""
+    offs = np.arange(z0, z1 + 1e-9, step)
+    u = np.asarray(u, float)
+    if along:  # rows of constant z = u, samples along u = offs
+        pts = line.point(offs[None, :], u[:, None])
+    else:
+        pts = line.point(u[:, None], offs[None, :])
+    return view.sample(pts[..., 0], pts[..., 1]), offs
+
+
+def measure_line(view, line, u, *, polarity, thickness, window):
+    """Refit the flat-membrane midline from the band centres at line positions ``u``.
+
+    Parameters
+    ----------
+    view : FrameView
+    line : Line
+        Current estimate (origin anywhere on the line).
+    u : ndarray of shape (N,)
+        Positions along the line where the band lies flat on the surface (px).
+    polarity : int
+    thickness : float
+        Band thickness estimate (px).
+    window : float
+        Half-height of the search window about the line (px).
+
+    Returns
+    -------
+    Line
+        Refitted line, origin at the projection of the old origin.
+    thickness, contrast, rms : float
+        Median band width (px), median band contrast, RMS scatter (px).
+    inliers : ndarray of bool
+    """
+    prof, offs = _transects(view, line, u, -window, window)
+    mid, lo, hi, con, width = band_edges(prof, offs, polarity, centre=np.full(len(u), len(offs) // 2),
+                                         search=int((0.5 * thickness + 4) / 0.5))
+    good = np.isfinite(mid) & (con > 0.25 * _nanmedian(con))
+    a, b, rms, ok = _robust_line(u[good], mid[good])
+    inl = np.zeros(len(u), bool)
+    inl[np.flatnonzero(good)[ok]] = True
+    if not np.isfinite(a):
+        return line, thickness, np.nan, np.nan, inl
+    # new line: z = a + b u in the old frame
+    new = line.shifted(0.0, a)
+    new = Line(new.x0, new.y0, line.angle + np.arctan(b))
+    return new, float(np.median(width[inl])), float(np.median(con[inl])), rms, inl
+
+
+def measure_walls(view, line, well, *, thickness, window, n_rows=12):
+    """Sub-pixel wall lines of a well; returns the refined :class:`Well` and the wall RMS (px).
+
+    The walls are measured on rows between 15 % and 75 % of the well depth
+    below the base's top surface (``z = -thickness / 2``) and extrapolated to
+    that surface: the wall tops are the rim.
+    """
+    top = -0.5 * thickness
+    depth = well.depth if np.isfinite(well.depth) else 4.0 * thickness
+    zs = top - np.linspace(0.15, 0.75, n_rows) * depth
+    out = {}
+    rms_all = []
+    for name, u0, slope in (("left", well.u_left, well.slope_left), ("right", well.u_right, well.slope_right)):
+        uc = u0 + slope * (zs - top)
+        offs = np.arange(-window, window + 1e-9, 0.5)
+        pts = line.point(uc[:, None] + offs[None, :], zs[:, None])
+        prof = view.sample(pts[..., 0], pts[..., 1])
+        pos, step = step_crossing(prof, offs)
+        ucross = uc + pos
+        a, b, rms, ok = _robust_line(zs - top, ucross)
+        if not np.isfinite(a) or ok.sum() < 3:
+            return None, np.nan
+        out[name] = (a, b)
+        rms_all.append(rms)
+    return replace(well, u_left=float(out["left"][0]), slope_left=float(out["left"][1]),
+                   u_right=float(out["right"][0]), slope_right=float(out["right"][1])), float(np.max(rms_all))
+
+
+def _well_intervals(profile, ratio_levels):
+    """Runs where the strip profile is liquid-like (True) as (start, stop) index pairs."""
+    mask = profile
+    d = np.diff(np.r_[0, mask.astype(np.int8), 0])
+    return list(zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1), strict=True))
+
+
+def find_chambers(view, *, thickness=None, min_width=20, chamber=None):
+    """Detect the flat membrane line and every well in a frame (bulge-up view).
+
+    Parameters
+    ----------
+    view : FrameView
+        Bulge-up view of a frame with a flat (or nearly flat) membrane.
+    thickness : float, optional
+        Expected membrane thickness (px), else measured.
+    min_width : float
+        Narrowest well accepted (px).
+    chamber : int or tuple of float, optional
+        Which well: index from the left, or ``(col0, col1)`` view columns
+        containing its axis; default the well nearest the view centre whose
+        walls are both inside the view.
+
+    Returns
+    -------
+    ChamberGeometry
+        With ``line`` centred on the chosen well's axis.
+
+    Raises
+    ------
+    ValueError
+        No band or no well found (message says what was looked for).
+    """
+    h, w = view.shape
+    f = max(1, min(h, w) // 256)
+    img = ndi.gaussian_filter(_coarse(np.rot90(view.frame, view.k), f), 1.0)
+    rows, val = _ridge_rows(img)
+    cols = np.arange(img.shape[1]).astype(float)
+    a, b, _, ok = _robust_line(cols, rows.astype(float), floor=1.5)
+    if not np.isfinite(a) or ok.mean() < 0.3:
+        raise ValueError("no straight membrane band found across the frame (is the membrane flat in the first frame?)")
+    polarity = 1 if np.median(val[ok]) > 0 else -1
+    # coarse -> full-resolution line (coarse pixel centres at f*i + (f-1)/2)
+    ang = float(np.arctan(b))
+    x0 = w / 2.0
+    y0 = f * (a + b * ((x0 - (f - 1) / 2) / f)) + (f - 1) / 2
+    line = Line(x0, y0, ang)
+    # refine on the whole width with a generous window, then measure the thickness
+    us = np.arange(-x0 + 8, w - x0 - 8, 4.0)
+    win = 6.0 * f + (thickness if thickness else 20.0)
+    line, thick, con, rms, inl = measure_line(view, line, us, polarity=polarity,
+                                              thickness=thickness or 2.0 * f, window=win)
+    if thickness is None:
+        # the band over wells is as thick as on the surface: re-measure with a matched window
+        line, thick, con, rms, inl = measure_line(view, line, us[inl] if inl.sum() > 10 else us, polarity=polarity,
+                                                  thickness=thick, window=thick + 10)
+        thickness = thick
+    # wells: strips just under the base's top surface versus just above the band (water)
+    top = -0.5 * thickness
+    ucol = np.arange(-x0, w - x0, 1.0)
+    zs_base = top - np.linspace(4.0, 4.0 + max(8.0, 1.5 * thickness), 7)
+    zs_water = 0.5 * thickness + np.linspace(6.0, 6.0 + max(8.0, 1.5 * thickness), 7)
+    pb = line.point(ucol[None, :], zs_base[:, None])
+    pw = line.point(ucol[None, :], zs_water[:, None])
+    base = _nanmedian(view.sample(pb[..., 0], pb[..., 1]), axis=0)
+    water = _nanmedian(view.sample(pw[..., 0], pw[..., 1]), axis=0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        ratio = np.log(np.abs(base) + 1e-6) - np.log(np.abs(water) + 1e-6)
+    ratio = ndi.median_filter(np.nan_to_num(ratio, nan=0.0), 5)
+    # base is far from water level, wells (liquid) close to it: two clusters of |log ratio|
+    mag = np.abs(ratio)
+    hi = np.percentile(mag, 90)
+    if hi < 0.02:
+        raise ValueError("no wells found: the strip under the membrane has the grey level of the water everywhere")
+    liquid = mag < 0.5 * hi
+    runs = [(s, e) for s, e in _well_intervals(liquid, None) if e - s >= min_width]
+    inside = [(s, e) for s, e in runs if s > 0 and e < len(ucol)]
+    if not runs:
+        raise ValueError("no wells found under the membrane band")
+    wells = []
+    for s, e in runs:
+        wells.append(Well(float(ucol[s] - 0.5), float(ucol[e - 1] + 0.5)))
+    # choose
+    cand = [wl for (s, e), wl in zip(runs, wells, strict=True) if (s, e) in inside] or wells
+    if chamber is None:
+        centre = (0.0, 0.0)  # x0 is the view centre
+        target = min(cand, key=lambda wl: abs(wl.centre - centre[0]))
+    elif isinstance(chamber, int | np.integer):
+        if not 0 <= int(chamber) < len(wells):
+            raise ValueError(f"chamber index {chamber} out of range: {len(wells)} wells found")
+        target = wells[int(chamber)]
+    else:
+        c0, c1 = (float(v) for v in chamber)
+        pick = [wl for wl in wells if c0 - x0 <= wl.centre <= c1 - x0]
+        if not pick:
+            raise ValueError(f"no well with its axis in columns {chamber!r}")
+        target = pick[0]
+    # well depth: along the axis, from the base top downwards: liquid -> base step
+    zz = np.arange(top - 2.0, top - max(12.0 * thickness, 0.5 * h), -0.5)
+    pts = line.point(np.full_like(zz, target.centre), zz)
+    col = view.sample(pts[:, 0], pts[:, 1])
+    liq = _nanmedian(col[: max(8, len(col) // 10)])
+    bas = _nanmedian(base[np.abs(ratio) >= 0.5 * hi]) if np.any(mag >= 0.5 * hi) else np.nan
+    depth = np.nan
+    if np.isfinite(liq) and np.isfinite(bas):
+        lev = 0.5 * (liq + bas)
+        sg = np.sign(col - lev)
+        chg = np.flatnonzero((sg[:-1] == np.sign(liq - lev)) & (sg[1:] != sg[:-1]) & np.isfinite(col[1:]))
+        if chg.size:
+            j = chg[0]
+            t = (lev - col[j]) / (col[j + 1] - col[j])
+            depth = float(-(zz[j] + t * (zz[j + 1] - zz[j])) + top)
+    target = replace(target, depth=depth)
+    target, wall_rms = measure_walls(view, line, target, thickness=thickness, window=8.0)
+    if target is None:
+        raise ValueError("the well walls could not be located")
+    ax = target.centre
+    line = line.shifted(ax, 0.0)
+    others = tuple(Well(wl.u_left - ax, wl.u_right - ax) for wl in wells if abs(wl.centre - ax) > target.half_width)
+    well = replace(target, u_left=target.u_left - ax, u_right=target.u_right - ax)
+    return ChamberGeometry(line=line, thickness=float(thickness), polarity=polarity, rim_radius=well.half_width,
+                           well=well, others=others, contrast=con, line_rms=rms, wall_rms=wall_rms)

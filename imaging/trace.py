@@ -1,0 +1,793 @@
+r"""Trace the membrane dome of one chamber through a micrograph series, frame by frame.
+
+For every frame (:class:`ChamberTracer`):
+
+1. **drift**: phase correlation (:func:`skimage.registration.phase_cross_correlation`)
+   of a patch of the base under the membrane (walls and well bottom; it
+   excludes the dome) against the first frame predicts where the chamber is;
+2. **flat membrane line and tilt**: sub-pixel centres of the membrane band
+   where it lies flat on the base's top surface, away from every well, with a
+   clipped least-squares line (its angle is the tilt);
+3. **rim and axis**: sub-pixel wall edges, wall lines extrapolated to the
+   base's top surface; the rim radius is half the distance between the wall
+   tops, the axis halfway between them;
+4. **dome**: a guide curve (the previous frame's dome, a manual prior, or a
+   minimum-cost path from rim to rim on a coarse background-flattened image)
+   is refined twice: grey levels are sampled along the guide's normals
+   (:func:`scipy.ndimage.map_coordinates`), a smooth path through the band is
+   chosen by dynamic programming (robust to dust and gaps), and the band's
+   two edges are located at the half-levels of each side (sub-pixel, either
+   contrast sign, any band width); a smoothing spline with clipped outliers
+   gives the profile;
+5. **measures and flags**: volume and area of both halves as solids of
+   revolution (:mod:`osmobulge.imaging.geometry`), and the quality figures.
+
+Everything is in pixels of the bulge-up view (see :mod:`osmobulge.imaging._chamber`);
+:func:`osmobulge.imaging.extract` converts to SI.
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+from scipy import ndimage as ndi
+from skimage.graph import route_through_array
+from skimage.registration import phase_cross_correlation
+
+from osmobulge.imaging._chamber import (
+    ROTATIONS,
+    ChamberGeometry,
+    FrameView,
+    band_edges,
+    detect_orientation,
+    find_chambers,
+    measure_line,
+    measure_walls,
+)
+from osmobulge.imaging._normals import polyline_normals, resample_polyline, viterbi_path
+from osmobulge.imaging.geometry import revolution_measures, smooth_profile
+
+__all__ = ["TraceSettings", "FrameTrace", "ChamberTracer", "FLAGS", "trace_series"]
+
+#: quality flags, in order of precedence
+FLAGS = ("ok", "no_membrane", "delaminated", "fractured", "touching", "poor_fit")
+
+
+@dataclass(frozen=True)
+class TraceSettings:
+    """Tuning knobs of the tracer (pixels unless stated).
+
+    Parameters
+    ----------
+    search : float
+        Half-width of the band search along the guide's normals when tracking
+        from the previous frame (plus half the band thickness).
+    refine : float
+        Half-width of the final sub-pixel pass.
+    station_step : float
+        Spacing of the normals along the curve.
+    sample_step : float
+        Spacing of the samples along each normal.
+    smoothing : float
+        Expected scatter of the traced points (sets the spline smoothing).
+    min_contrast : float
+        Band contrast, as a fraction of the flat band's, below which a station
+        counts as "no membrane" (gaps, fracture).
+    gap_flag : float
+        Longest run without membrane, in band thicknesses, that flags ``fractured``.
+    delamination_flag : float
+        Rim contact (1 = membrane on the surface at the rim, 0 = lifted) below which
+        a frame is ``delaminated``.
+    touching_flag : float
+        Sustained gap (px) between the dome and another membrane below which a
+        frame is ``touching``.
+    residual_flag : float
+        RMS residual (px) of the traced points about the spline that flags ``poor_fit``.
+    asymmetry_flag : float
+        Left/right volume disagreement that flags ``poor_fit``.
+    max_drift : float
+        Largest frame-to-frame drift searched by the phase correlation.
+    """
+
+    search: float = 20.0
+    refine: float = 5.0
+    station_step: float = 1.0
+    sample_step: float = 0.5
+    smoothing: float = 0.35
+    min_contrast: float = 0.25
+    gap_flag: float = 1.5
+    delamination_flag: float = 0.5
+    touching_flag: float = 2.0
+    residual_flag: float = 1.0
+    asymmetry_flag: float = 0.08
+    max_drift: float = 40.0
+
+    def to_attrs(self) -> dict:
+        return {f"trace_{k}": float(v) for k, v in self.__dict__.items()}
+
+
+@dataclass
+class FrameTrace:
+    """Everything measured in one frame (pixels of the bulge-up view).
+
+    ``u``/``z`` are the dome midline in chamber coordinates (px) from the left
+    rim to the right rim (spline samples); ``flag`` is one of :data:`FLAGS`
+    and ``figures`` holds every quality figure (the one that triggered the
+    flag is named in ``flag_figure``).
+    """
+
+    index: int
+    ok: bool = False
+    geometry: ChamberGeometry | None = None
+    u: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    z: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    points_u: np.ndarray = field(default_factory=lambda: np.zeros(0))  # accepted raw points
+    points_z: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    source: str = "auto"
+    volume_left: float = np.nan
+    volume_right: float = np.nan
+    area_left: float = np.nan
+    area_right: float = np.nan
+    height: float = np.nan
+    residual_rms: float = np.nan
+    drift: tuple = (np.nan, np.nan)
+    flag: str = "no_membrane"
+    flag_figure: str = ""
+    flag_value: float = np.nan
+    figures: dict = field(default_factory=dict)
+    message: str = ""
+
+    @property
+    def volume(self):
+        return 0.5 * (self.volume_left + self.volume_right)
+
+    @property
+    def area(self):
+        return 0.5 * (self.area_left + self.area_right)
+
+
+# ---------------------------------------------------------------------------------- helpers
+def _nanmedian(a, **kw):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        return np.nanmedian(a, **kw)
+
+
+def _longest_run(mask, weights):
+    """Largest sum of ``weights`` over a run of True in ``mask``."""
+    best = cur = 0.0
+    for m, w in zip(mask, weights, strict=True):
+        cur = cur + w if m else 0.0
+        best = max(best, cur)
+    return best
+
+
+def _sustained_min(x, n):
+    """Smallest value of a running maximum over ``n`` samples (a gap sustained over n stations)."""
+    if len(x) < n:
+        return float(np.max(x)) if len(x) else np.inf
+    return float(np.min(ndi.maximum_filter1d(x, n, mode="nearest")[n // 2 : len(x) - n // 2]))
+
+
+# ---------------------------------------------------------------------------------- tracer
+class ChamberTracer:
+    """Follows one chamber through a series, one frame at a time (constant memory).
+
+    Parameters
+    ----------
+    first_frame : ndarray of shape (H, W)
+        A frame with a flat membrane (normally the first of the series).
+    bulge_direction : {"auto", "up", "down", "left", "right"}
+        Direction the dome grows in the image.
+    chamber_region : int or tuple of float, optional
+        Which well: index from the left in the bulge-up view or ``(col0, col1)``
+        of the view holding its axis; default the most central complete well.
+    thickness : float, optional, px
+        Membrane thickness (else measured).
+    settings : TraceSettings
+    """
+
+    def __init__(self, first_frame, *, bulge_direction="auto", chamber_region=None, thickness=None,
+                 settings=None):
+        valid = ("auto", *ROTATIONS)
+        if bulge_direction not in valid:
+            raise ValueError(f"bulge_direction must be one of {valid}, got {bulge_direction!r}")
+        frame = np.asarray(first_frame)
+        if frame.ndim != 2:
+            raise ValueError(f"frames must be 2-D (H, W), got shape {frame.shape}")
+        self.settings = settings or TraceSettings()
+        if bulge_direction == "auto":
+            bulge_direction, _ = detect_orientation(frame)
+        self.bulge_direction = bulge_direction
+        self.k = ROTATIONS[bulge_direction]
+        view = FrameView(frame, self.k)
+        self.ref = find_chambers(view, thickness=thickness, chamber=chamber_region)
+        self.shape = frame.shape
+        g = self.ref
+        # registration patch: the base under the membrane around the well (no dome)
+        top = -0.5 * g.thickness - 3.0
+        depth = g.well.depth if np.isfinite(g.well.depth) else 4 * g.thickness
+        corners = np.array([g.line.point(u, z) for u in (-1.6 * g.rim_radius, 1.6 * g.rim_radius)
+                            for z in (0.5 * g.thickness + 6.0, top - depth - 12.0)])
+        c0, r0 = np.floor(corners.min(axis=0)).astype(int)
+        c1, r1 = np.ceil(corners.max(axis=0)).astype(int) + 1
+        self._patch_box = (r0, r1, c0, c1)
+        ref_patch, _ = view.patch(r0, r1, c0, c1)
+        self._ref_patch = ref_patch - ndi.gaussian_filter(ref_patch, 8.0, mode="nearest")
+        # sign of (liquid - base) grey levels: the left wall steps by this sign going right
+        zmid = top - 0.4 * depth
+        pl = g.line.point(np.array([-0.5 * g.rim_radius, -g.rim_radius - 3 * g.thickness]), zmid)
+        liq, bas = view.sample(pl[:, 0], pl[:, 1])
+        self._wall_sign = 1.0 if liq >= bas else -1.0
+        self.blur = self._estimate_blur(view)
+        self._drift = np.zeros(2)  # (dx, dy) of the current frame w.r.t. the first, view px
+        self.prev = None  # last good FrameTrace
+        self.priors = {}  # frame index -> (u, z) guide in chamber px
+        # flat-line columns: away from every well's rim
+        self._flat_u = self._flat_columns(view)
+
+    # ---------------------------------------------------------------------- geometry
+    def _estimate_blur(self, view):
+        """Gaussian blur (px) of the optics from the 10-90 % rise of the band's upper edge."""
+        from osmobulge.imaging._chamber import _transects
+
+        g = self.ref
+        us = np.r_[np.linspace(-g.line.x0 + 10, g.well.u_left - 0.6 * g.rim_radius, 15),
+                   np.linspace(g.well.u_right + 0.6 * g.rim_radius, view.shape[1] - g.line.x0 - 10, 15)]
+        prof, offs = _transects(view, g.line, us, 0.0, 0.5 * g.thickness + 15.0, step=0.25)
+        q = g.polarity * -_nanmedian(prof, axis=0)  # band high at offset 0 .. water low
+        if not np.all(np.isfinite(q)):
+            return 1.0
+        hi_, lo_ = q[0], np.median(q[-8:])
+        f = (q - lo_) / max(hi_ - lo_, 1e-12)
+        i90 = np.flatnonzero(f < 0.9)
+        i10 = np.flatnonzero(f < 0.1)
+        if not i90.size or not i10.size:
+            return 1.0
+        d = offs[i10[0]] - offs[i90[0]]
+        return float(np.clip(np.sqrt(max((d / 2.563) ** 2 - 1.0 / 12.0, 0.0)), 0.3, 20.0))
+
+    def _flat_columns(self, view):
+        g = self.ref
+        h, w = view.shape
+        x0 = g.line.x0
+        us = np.arange(-x0 + 6, w - x0 - 6, 3.0)
+        keep = np.ones(us.shape, bool)
+        margin = 0.45 * g.rim_radius + g.thickness
+        for wl in (g.well, *g.others):
+            keep &= ~((us > wl.u_left - margin) & (us < wl.u_right + margin))
+        if keep.sum() < 12:  # narrow field: use what lies outside our own well at least
+            keep = (us < g.well.u_left - g.thickness) | (us > g.well.u_right + g.thickness)
+        return us[keep]
+
+    def _register(self, view):
+        """Drift of the frame from phase correlation of the base patch (high-passed: no illumination)."""
+        r0, r1, c0, c1 = self._patch_box
+        dx, dy = np.round(self._drift).astype(int)
+        cur, _ = view.patch(r0 + dy, r1 + dy, c0 + dx, c1 + dx)
+        if cur.shape != self._ref_patch.shape:
+            return self._drift.copy()
+        cur = cur - ndi.gaussian_filter(cur, 8.0, mode="nearest")
+        shift, _, _ = phase_cross_correlation(self._ref_patch, cur, upsample_factor=1, normalization=None)
+        # the shift registers the current patch onto the reference one
+        return np.array([dx - shift[1], dy - shift[0]], float)
+
+    def _coarse_line(self, view, line):
+        """Move the predicted line onto the band with a wide box-filter search (robust to bad drift)."""
+        g0 = self.ref
+        us = self._flat_u[:: max(1, len(self._flat_u) // 60)]
+        half = 0.5 * g0.thickness + self.settings.max_drift
+        from osmobulge.imaging._chamber import _transects
+
+        prof, offs = _transects(view, line, us, -half, half, step=1.0)
+        prof = np.where(np.isfinite(prof), prof, _nanmedian(prof))
+        q = g0.polarity * -_nanmedian(prof, axis=0)  # median over columns: dust-free band profile
+        if not np.all(np.isfinite(q)):
+            return line
+        w = max(1, int(round(g0.thickness)))
+        fl = max(2, int(round(0.25 * g0.thickness)) + 2)
+        c = np.convolve(q, np.ones(w) / w, mode="same")
+        left = np.convolve(q, np.ones(fl) / fl, mode="same")
+        side = 0.5 * (np.roll(left, (w + fl) // 2 + 1) + np.roll(left, -((w + fl) // 2 + 1)))
+        score = c - side
+        score[: w + fl] = -np.inf
+        score[-(w + fl):] = -np.inf
+        return line.shifted(0.0, float(offs[int(np.argmax(score))]))
+
+    def _coarse_walls(self, view, line, well):
+        """Move the predicted walls onto the strongest edges of the right sign (median over rows)."""
+        g0 = self.ref
+        top = -0.5 * g0.thickness
+        depth = g0.well.depth if np.isfinite(g0.well.depth) else 4 * g0.thickness
+        zs = top - np.linspace(0.2, 0.7, 9) * depth
+        span = self.settings.max_drift
+        out = {}
+        for name, u0, slope, sign in (("u_left", well.u_left, well.slope_left, self._wall_sign),
+                                      ("u_right", well.u_right, well.slope_right, -self._wall_sign)):
+            offs = np.arange(-span, span + 1e-9, 1.0)
+            uc = u0 + slope * (zs - top)
+            pts = line.point(uc[:, None] + offs[None, :], zs[:, None])
+            prof = _nanmedian(view.sample(pts[..., 0], pts[..., 1]), axis=0)
+            if not np.all(np.isfinite(prof)):
+                return well
+            grad = sign * np.gradient(ndi.gaussian_filter1d(prof, 1.0))
+            out[name] = u0 + float(offs[int(np.argmax(grad))])
+        return replace(well, **out)
+
+    def measure_geometry(self, view):
+        """Drift, flat line, walls and rim of the chamber in one frame (a :class:`ChamberGeometry`)."""
+        g0 = self.ref
+        drift = self._register(view)
+        if not np.all(np.isfinite(drift)) or np.hypot(*(drift - self._drift)) > self.settings.max_drift:
+            drift = self._drift.copy()
+        line = replace(g0.line, x0=g0.line.x0 + drift[0], y0=g0.line.y0 + drift[1])
+        well = g0.well
+        if self.prev is not None and self.prev.geometry is not None:
+            line = replace(line, angle=self.prev.geometry.line.angle)
+            well = replace(self.prev.geometry.well, depth=g0.well.depth)
+        line = self._coarse_line(view, line)
+        win = 0.5 * g0.thickness + 8.0
+        line, thick, con, rms, inl = measure_line(view, line, self._flat_u, polarity=g0.polarity,
+                                                  thickness=g0.thickness, window=win)
+        well = self._coarse_walls(view, line, well)
+        well, wall_rms = measure_walls(view, line, well, thickness=g0.thickness, window=8.0)
+        if well is None:
+            return None, drift
+        ax = well.centre
+        line = line.shifted(ax, 0.0)
+        well = replace(well, u_left=well.u_left - ax, u_right=well.u_right - ax)
+        geom = replace(g0, line=line, rim_radius=well.half_width, well=well, contrast=con, line_rms=rms,
+                       wall_rms=wall_rms)
+        return geom, drift
+
+    # ---------------------------------------------------------------------- guides
+    def _global_guide(self, view, g):
+        """Minimum-cost path rim to rim on a coarse, background-flattened image (chamber px)."""
+        R = g.rim_radius
+        f = max(1, int(round(R / 50.0)))
+        umax = 2.1 * R
+        zmax = 3.3 * R
+        corners = np.array([g.line.point(u, z) for u in (-umax, umax) for z in (-g.thickness, zmax)])
+        c0, r0 = np.floor(corners.min(axis=0)).astype(int)
+        c1, r1 = np.ceil(corners.max(axis=0)).astype(int) + 1
+        patch, (pr0, pc0) = view.patch(r0, r1, c0, c1)
+        hh, ww = patch.shape[0] // f * f, patch.shape[1] // f * f
+        if hh < 4 * f or ww < 4 * f:
+            return None
+        coarse = patch[:hh, :ww].reshape(hh // f, f, ww // f, f).mean(axis=(1, 3))
+        bg = ndi.gaussian_filter(coarse, 8.0, mode="nearest")
+        con = g.polarity * (bg - coarse) / np.maximum(np.abs(bg), 1e-9)
+        ref = abs(g.contrast) / max(np.median(np.abs(bg)), 1e-9) if np.isfinite(g.contrast) else np.percentile(con, 99.5)
+        c = np.clip(con / max(ref, 1e-9), 0.0, 1.0)
+        cost = 1.0 / (0.04 + c) ** 2
+        # coarse pixel centres in view coordinates -> chamber (u, z)
+        yy, xx = np.mgrid[0 : hh // f, 0 : ww // f]
+        vx = pc0 + f * xx + (f - 1) / 2.0
+        vy = pr0 + f * yy + (f - 1) / 2.0
+        u, z = g.line.coords(np.stack([vx.ravel(), vy.ravel()], axis=1))
+        u = u.reshape(vx.shape)
+        z = z.reshape(vx.shape)
+        cost[z < -0.5 * f - 1.0] = 1e6  # never below the flat membrane (the well)
+        cost[np.abs(u) > umax] = 1e6
+
+        def node(uu):
+            p = g.line.point(uu, 0.0)
+            j = int(np.clip(round((p[0] - pc0 - (f - 1) / 2.0) / f), 0, ww // f - 1))
+            i = int(np.clip(round((p[1] - pr0 - (f - 1) / 2.0) / f), 0, hh // f - 1))
+            return i, j
+
+        path, _ = route_through_array(cost, node(-R), node(R), fully_connected=True, geometric=True)
+        path = np.asarray(path)
+        pu, pz = u[path[:, 0], path[:, 1]], z[path[:, 0], path[:, 1]]
+        if len(pu) >= 5:
+            pu = ndi.uniform_filter1d(pu, 3, mode="nearest")
+            pz = ndi.uniform_filter1d(pz, 3, mode="nearest")
+        return np.c_[pu, pz], 1.5 * f + 2.0
+
+    # ---------------------------------------------------------------------- refinement
+    def _refine(self, view, g, guide_uz, half, *, dp=True, width=None):
+        """One pass along the guide's normals: band midline offsets and station data."""
+        st = self.settings
+        guide = g.line.point(guide_uz[:, 0], guide_uz[:, 1])
+        pts, s = resample_polyline(guide, st.station_step)
+        nrm = polyline_normals(pts, smooth=2.0)
+        # normals point to the left of travel; travel is left rim -> right rim, so "left" is outward (up)
+        w = half + 0.5 * g.thickness
+        offs = np.arange(-w, w + 1e-9, st.sample_step)
+        x = pts[:, 0:1] + offs[None, :] * nrm[:, 0:1]
+        y = pts[:, 1:2] + offs[None, :] * nrm[:, 1:2]
+        prof = view.sample(x, y)
+        if not np.all(np.isfinite(prof)):
+            prof = np.where(np.isfinite(prof), prof, _nanmedian(prof))
+        prof = ndi.gaussian_filter1d(prof, 1.0, axis=0, mode="nearest")
+        if dp:
+            q = g.polarity * (np.median(prof, axis=1, keepdims=True) - prof)
+            dec = max(1, int(round(3.0 / st.station_step)))
+            sub = max(1, int(round(1.0 / st.sample_step)))
+            # cap the score at the membrane's typical contrast: a dark speck (dust) can then
+            # score no more than the membrane, and the smooth path does not detour to it
+            # (a running median along the curve, so a faint thin pole is capped at its own level)
+            cap = ndi.median_filter(q.max(axis=1), 41, mode="nearest")
+            cap = np.maximum(cap, 1e-12 + 0.05 * float(np.median(cap)))
+            sc = (q / cap[:, None])[::dec, ::sub]
+            path = viterbi_path(np.clip(sc, -0.5, 1.0), max_step=max(1, int(round(dec * st.station_step))),
+                                penalty=0.3)
+            centre = np.interp(np.arange(len(q)), np.arange(0, len(q), dec)[: len(path)], path * sub)
+            centre = centre.round().astype(int)
+            # the path lies inside the band (thick or thin): look for the peak only close to it
+            search = int(round((2.0 + 1.5 * self.blur) / st.sample_step))
+        else:
+            centre = np.full(len(prof), len(offs) // 2)
+            if width is None:
+                search = int(round((0.5 * g.thickness + half) / st.sample_step))
+            else:  # the peak lies within the band's own half-width of the guide (never on a nearby speck)
+                wi = np.interp(s, width[0], width[1])
+                search = np.round((0.5 * wi + 2.0 + 1.5 * self.blur) / st.sample_step).astype(int)
+        mid, lo, hi, con, width = band_edges(prof, offs, g.polarity, centre=centre, search=search,
+                                             side=max(2, int(1.5 / st.sample_step)))
+        return {"mid": mid, "lo": lo, "hi": hi, "contrast": con, "width": width, "stations": s,
+                "station_pts": pts, "normals": nrm, "half": w}
+
+    def _exclusion(self, g, u, z):
+        """Points too close to the flat band at or beyond the rims (merged with it) are not trusted."""
+        R = g.rim_radius
+        zc = g.thickness + 3.0
+        return (np.abs(u) > R - 1.0) & (z < zc)
+
+    def trace_dome(self, view, g, guide=None):
+        """Trace the dome given the frame geometry; returns a dict of results (chamber px)."""
+        st = self.settings
+        R = g.rim_radius
+        tried_global = False
+        if guide is None:
+            res = self._global_guide(view, g)
+            if res is None:
+                return None
+            guide, half = res
+            tried_global = True
+        else:
+            half = st.search
+        out = None
+        for _attempt in range(2):
+            gu = np.asarray(guide, float)
+            # guide from rim to rim through the current rim points
+            keep = ~self._exclusion(g, gu[:, 0], gu[:, 1])
+            gu = gu[keep]
+            if len(gu) < 3:
+                gu = np.c_[np.linspace(-R, R, 20), np.zeros(20)]
+            if gu[0, 0] > gu[-1, 0]:
+                gu = gu[::-1]
+            gu = np.concatenate([[[-R, 0.0]], gu, [[R, 0.0]]])
+            out = self._passes(view, g, gu, half)
+            if out is not None and self._trustworthy(out):
+                break
+            if tried_global:
+                break
+            res = self._global_guide(view, g)
+            if res is None:
+                break
+            guide, half = res
+            tried_global = True
+        return out
+
+    def _trustworthy(self, tr):
+        """A tracked (not global) result good enough to keep: strong band along the whole dome."""
+        dome = ~tr["excluded"]
+        if not dome.any():
+            return False
+        con = tr["contrast"][dome]
+        return bool(np.mean(tr["good"][dome]) > 0.9 and _nanmedian(con) > 0.5 * tr["ref_contrast"]
+                    and tr["residual_rms"] < self.settings.residual_flag and tr["converged"]
+                    and tr["edge_fraction"] < 0.05)
+
+    def _clean(self, g, r, ref_con):
+        """Accepted stations of a pass: finite, enough contrast, outside the rim zones, not outliers."""
+        st = self.settings
+        mid = r["mid"]
+        pts = r["station_pts"] + np.nan_to_num(mid)[:, None] * r["normals"]
+        pu, pz = g.line.coords(pts)
+        finite = np.isfinite(mid)
+        good = finite & (r["contrast"] > st.min_contrast * ref_con)
+        excl = self._exclusion(g, pu, pz) | self._exclusion(g, *g.line.coords(r["station_pts"]))
+        use = good & ~excl
+        # outliers: far from a running median of the offsets along the curve
+        if use.sum() > 10:
+            filled = np.interp(np.arange(len(mid)), np.flatnonzero(use), mid[use])
+            med = ndi.median_filter(filled, 15, mode="nearest")
+            dev = np.abs(mid - med)
+            mad = 1.4826 * float(np.median(dev[use]))
+            use &= dev <= max(4.0 * mad, 1.0)
+        d2 = np.diff(np.where(use, mid, np.nan), 2)
+        d2 = d2[np.isfinite(d2)]
+        sigma = 1.4826 * float(np.median(np.abs(d2))) / np.sqrt(6.0) if d2.size > 10 else st.smoothing
+        r.update(pu=pu, pz=pz, good=good, excluded=excl, use=use, sigma=float(np.clip(sigma, 0.01, 3.0)))
+        return r
+
+    def _bridge(self, g, pu, pz, side, reach=40.0):
+        """Points bridging the untraceable foot of the dome (merged with the flat band) to the rim.
+
+        Fits the direction ``theta(rho)`` of the traced points seen from the rim
+        point, linear in the distance ``rho`` (a curve leaving the rim at an
+        angle with a curvature), over the nearest ``reach`` px of trusted points,
+        and fills the gap from the rim out to them.
+        """
+        R = g.rim_radius
+        du, dz = pu - side * R, pz
+        rho = np.hypot(du, dz)
+        if rho.size == 0:
+            return np.zeros((0, 2))
+        rmin = float(rho.min())
+        if rmin < 2.0:
+            return np.zeros((0, 2))
+        near = rho < rmin + reach
+        # angle measured from the outward direction (-u on the left, +u on the right) towards +z
+        th = np.arctan2(dz[near], side * du[near])
+        if near.sum() >= 4:
+            c1, c0 = np.polyfit(rho[near], np.unwrap(th), 1)
+        else:
+            c0, c1 = float(np.median(th)), 0.0
+        rr = np.arange(1.0, rmin, 1.0)
+        tt = c0 + c1 * rr
+        return np.c_[side * R + side * rr * np.cos(tt), rr * np.sin(tt)]
+
+    @staticmethod
+    def _robust_fit(U, Z, ks, *, pinned=True):
+        """Spline through (U, Z) rejecting outliers (dust bumps) against a stiff spline first.
+
+        The ends are pinned (weight 10) when ``pinned``.  Returns the final spline
+        (knots ``ks`` apart) and the mask of kept points.
+        """
+        n = len(U)
+        wts = np.ones(n)
+        if pinned:
+            wts[[0, -1]] = 10.0
+        keep = np.ones(n, bool)
+        inner = np.ones(n, bool)
+        if pinned:
+            inner[[0, -1]] = False
+        for spacing, floor, iters in ((max(15.0, 2.5 * ks), 1.0, 4), (ks, 0.75, 2)):
+            for _ in range(iters):
+                spl = smooth_profile(np.c_[U, Z], knot_spacing=spacing, weights=np.where(keep, wts, 0.0))
+                res = spl.residuals
+                sel = keep & inner
+                mad = 1.4826 * float(np.median(res[sel])) if sel.any() else 0.0
+                new = np.isfinite(res) & (res <= max(3.5 * mad, floor))
+                if pinned:
+                    new[[0, -1]] = True
+                if np.array_equal(new, keep) or new.sum() < 6:
+                    break
+                keep = new
+        spl = smooth_profile(np.c_[U, Z], knot_spacing=ks, weights=np.where(keep, wts, 0.0))
+        return spl, keep
+
+    def _guide_from(self, g, r, ks):
+        R = g.rim_radius
+        use = r["use"]
+        U = np.r_[-R, r["pu"][use], R]
+        Z = np.r_[0.0, r["pz"][use], 0.0]
+        spl, _ = self._robust_fit(U, Z, max(ks, 8.0))
+        return spl.sample(step=1.0)[1]
+
+    def _passes(self, view, g, guide_uz, half):
+        st = self.settings
+        R = g.rim_radius
+        ref_con = abs(g.contrast) if np.isfinite(g.contrast) else None
+        # pass 1: wide search with dynamic programming; a robust stiff spline gives the next guide
+        r = self._refine(view, g, guide_uz, half, dp=True)
+        if ref_con is None:
+            ref_con = float(np.nanpercentile(r["contrast"], 90))
+        r = self._clean(g, r, ref_con)
+        use = r["use"]
+        if use.sum() < 6:
+            return None
+        ks = float(np.clip(4.0 + 10.0 * r["sigma"], 4.0, 15.0))
+        uz = self._guide_from(g, r, ks)
+        # pass 2: narrow search around the previous curve, repeated until it stops moving
+        wd = np.where(use, r["width"], np.nan)
+        ok_w = np.isfinite(wd)
+        wmed = ndi.median_filter(np.interp(np.arange(len(wd)), np.flatnonzero(ok_w), wd[ok_w]), 31, mode="nearest")
+        for _ in range(3):
+            sw = resample_polyline(g.line.point(uz[:, 0], uz[:, 1]), st.station_step)[1]
+            width = (np.linspace(0.0, sw[-1], len(wmed)), wmed)
+            r = self._refine(view, g, uz, st.refine, dp=False, width=width)
+            r = self._clean(g, r, ref_con)
+            use = r["use"]
+            if use.sum() < 6:
+                return None
+            moved = float(np.percentile(np.abs(r["mid"][use]), 90))
+            if moved < 1.0:
+                break
+            uz = self._guide_from(g, r, ks)
+        r["converged"] = moved < 1.0
+        pu, pz = r["pu"][use], r["pz"][use]
+        bl, br = self._bridge(g, pu, pz, -1.0), self._bridge(g, pu, pz, 1.0)
+        U = np.r_[-R, bl[:, 0], pu, br[::-1, 0], R]
+        Z = np.r_[0.0, bl[:, 1], pz, br[::-1, 1], 0.0]
+        ks = float(np.clip(4.0 + 10.0 * r["sigma"], 4.0, 15.0))
+        spl, keep = self._robust_fit(U, Z, ks)
+        res = spl.residuals
+        _, puz = spl.sample(step=1.0)
+        inner = keep.copy()
+        inner[[0, -1]] = False
+        edge = (np.abs(r["lo"]) > r["half"] - 1.0) | (np.abs(r["hi"]) > r["half"] - 1.0)
+        dome = ~r["excluded"]
+        r.update(
+            spline=spl,
+            u=puz[:, 0],
+            z=puz[:, 1],
+            points_u=U[inner],
+            points_z=Z[inner],
+            residual_rms=float(np.sqrt(np.mean(res[inner] ** 2))) if inner.any() else np.nan,
+            good_fraction=float(np.mean(r["good"][dome])) if dome.any() else 0.0,
+            edge_fraction=float(np.mean(edge[use])) if use.any() else 1.0,
+            ref_contrast=ref_con,
+        )
+        return r
+
+    # ---------------------------------------------------------------------- quality figures
+    def _figures(self, view, g, tr):
+        st = self.settings
+        R = g.rim_radius
+        fig = {}
+        con, good, excl = tr["contrast"], tr["good"], tr["excluded"]
+        ds = np.r_[0.0, np.diff(tr["stations"])]
+        dome = ~excl
+        ref = tr["ref_contrast"]
+        fig["dome_contrast"] = float(_nanmedian(con[dome]) / ref) if dome.any() and ref > 0 else 0.0
+        fig["gap_length"] = float(_longest_run((~good)[dome], ds[dome]) / max(g.thickness, 1.0))
+        # rim contact: membrane on the flat line just outside each rim
+        uu = R + np.linspace(0.02, 0.1, 9) * R
+        vals = []
+        for sgn in (-1.0, 1.0):
+            p = g.line.point(sgn * uu, 0.0)
+            band = view.sample(p[:, 0], p[:, 1])
+            pw = g.line.point(sgn * uu, 0.5 * g.thickness + 6.0 + 0.0 * uu)
+            pw2 = g.line.point(sgn * (R + 0.5 * R) + 0.0 * uu, 0.5 * g.thickness + 6.0)
+            water = _nanmedian(np.r_[view.sample(pw2[:, 0], pw2[:, 1])])
+            del pw
+            vals.append(float(g.polarity * (water - _nanmedian(band)) / max(abs(g.contrast), 1e-9)))
+        fig["rim_contact"] = float(min(vals))
+        # sustained gap to another membrane beyond the band, both sides of the dome
+        fig["neighbour_gap"] = self._neighbour_gap(view, g, tr)
+        fig["residual_rms"] = tr["residual_rms"]
+        return fig
+
+    def _neighbour_gap(self, view, g, tr):
+        st = self.settings
+        pts, nrm, lo, hi, good, excl = (tr[k] for k in ("station_pts", "normals", "lo", "hi", "good", "excluded"))
+        use = good & ~excl & np.isfinite(lo) & np.isfinite(hi)
+        if use.sum() < 10:
+            return np.inf
+        depth = max(2.0 * g.thickness, 20.0) + 2.5 * self.blur
+        offs = np.arange(1.5 + 2.5 * self.blur, depth, 1.0)
+        gaps = []
+        for sgn, edge in ((1.0, hi), (-1.0, lo)):
+            start = pts[use] + edge[use, None] * nrm[use]
+            x = start[:, 0:1] + sgn * offs[None, :] * nrm[use, 0:1]
+            y = start[:, 1:2] + sgn * offs[None, :] * nrm[use, 1:2]
+            prof = view.sample(x, y)
+            base = _nanmedian(prof[:, -6:], axis=1, keepdims=True)
+            q = g.polarity * (base - prof) / max(abs(g.contrast), 1e-9)
+            _, zz = g.line.coords(np.c_[x.ravel(), y.ravel()])
+            hit = (q > 0.3) & (zz.reshape(x.shape) > g.thickness + 2.0)
+            first = np.where(hit.any(axis=1), np.argmax(hit, axis=1), len(offs) - 1)
+            gaps.append(offs[first] - offs[0])
+        return float(min(_sustained_min(gap, 25) for gap in gaps))
+
+    def _flag(self, fig):
+        st = self.settings
+        checks = [
+            ("no_membrane", "dome_contrast", fig["dome_contrast"] < st.min_contrast),
+            ("delaminated", "rim_contact", fig["rim_contact"] < st.delamination_flag),
+            ("fractured", "gap_length", fig["gap_length"] > st.gap_flag),
+            ("touching", "neighbour_gap", fig["neighbour_gap"] < st.touching_flag),
+            ("poor_fit", "residual_rms", not fig["residual_rms"] <= st.residual_flag),
+            ("poor_fit", "volume_disagreement", fig.get("volume_disagreement", 0.0) > st.asymmetry_flag),
+        ]
+        for name, key, hit in checks:
+            if hit:
+                return name, key, float(fig[key])
+        return "ok", "", np.nan
+
+    # ---------------------------------------------------------------------- one frame
+    def process(self, frame, index=0, *, guide=None, manual=None):
+        """Measure one frame.
+
+        Parameters
+        ----------
+        frame : ndarray of shape (H, W)
+        index : int
+            Frame index (for priors and bookkeeping).
+        guide : ndarray of shape (N, 2), optional
+            Prior dome points ``(x=col, y=row)`` of the stored frame (px), used as the guide.
+        manual : ndarray of shape (N, 2), optional
+            Manual dome points ``(x=col, y=row)`` of the stored frame (px): replace the trace.
+
+        Returns
+        -------
+        FrameTrace
+        """
+        frame = np.asarray(frame)
+        if frame.shape != self.shape:
+            raise ValueError(f"frame {index} has shape {frame.shape}, expected {self.shape}")
+        view = FrameView(frame, self.k)
+        out = FrameTrace(index=index)
+        g, drift = self.measure_geometry(view)
+        out.drift = (float(drift[0]), float(drift[1]))
+        if g is None:
+            out.message = "chamber walls not found"
+            out.flag, out.flag_figure, out.flag_value = "no_membrane", "wall_rms", np.nan
+            return out
+        # the measured axis is the best drift estimate for the next frame's prediction
+        self._drift = np.array([g.line.x0 - self.ref.line.x0, g.line.y0 - self.ref.line.y0])
+        out.geometry = g
+        if manual is not None:
+            return self._from_points(view, g, out, manual)
+        guide_uz = None
+        if guide is not None:
+            gx, gy = view.from_frame(np.asarray(guide)[:, 1], np.asarray(guide)[:, 0])
+            guide_uz = np.c_[g.line.coords(np.c_[gx, gy])]
+        elif self.prev is not None and self.prev.flag == "ok" and len(self.prev.u):
+            guide_uz = np.c_[self.prev.u, self.prev.z]
+        tr = self.trace_dome(view, g, guide_uz)
+        if tr is None:
+            out.message = "no dome traced"
+            out.figures = {"dome_contrast": 0.0}
+            out.flag, out.flag_figure, out.flag_value = "no_membrane", "dome_contrast", 0.0
+            return out
+        out.u, out.z = tr["u"], tr["z"]
+        out.points_u, out.points_z = tr["points_u"], tr["points_z"]
+        out.residual_rms = tr["residual_rms"]
+        self._measure(out)
+        fig = self._figures(view, g, tr)
+        fig["volume_disagreement"] = out.figures.get("volume_disagreement", np.nan)
+        out.figures.update(fig)
+        out.flag, out.flag_figure, out.flag_value = self._flag(out.figures)
+        out.ok = True
+        if out.flag == "ok":
+            self.prev = out
+        return out
+
+    def _measure(self, out):
+        try:
+            m = revolution_measures(out.u, out.z)
+        except ValueError as err:
+            out.message = str(err)
+            return
+        out.volume_left, out.volume_right = m.volume_left, m.volume_right
+        out.area_left, out.area_right = m.area_left, m.area_right
+        out.height = m.height
+        # relative to the volume, but never to less than a half-pixel layer over the well
+        g = out.geometry
+        floor = 0.5 * np.pi * g.rim_radius**2 if g is not None else 0.0
+        out.figures["volume_disagreement"] = float(abs(m.volume_left - m.volume_right) / max(abs(m.volume), floor,
+                                                                                            1e-300))
+
+    def _from_points(self, view, g, out, manual):
+        pts = np.asarray(manual, float)
+        vx, vy = view.from_frame(pts[:, 1], pts[:, 0])
+        u, z = g.line.coords(np.c_[vx, vy])
+        order = np.argsort(u) if np.all(np.diff(u) != 0) and False else np.arange(len(u))
+        u, z = u[order], z[order]
+        if u[0] > u[-1]:
+            u, z = u[::-1], z[::-1]
+        spl = smooth_profile(np.c_[u, z])
+        _, puz = spl.sample(step=1.0)
+        out.u, out.z = puz[:, 0], puz[:, 1]
+        out.points_u, out.points_z = u, z
+        out.source = "manual"
+        out.residual_rms = 0.0
+        self._measure(out)
+        out.figures.update({"residual_rms": 0.0})
+        out.flag, out.flag_figure, out.flag_value = "ok", "", np.nan
+        out.ok = True
+        return out
+
+
+def trace_series(frames, **kwargs):
+    """Trace every frame of an in-memory series (convenience for tests); returns a list of :class:`FrameTrace`."""
+    frames = list(frames)
+    tracer = ChamberTracer(frames[0], **kwargs)
+    return tracer, [tracer.process(f, i) for i, f in enumerate(frames)]
