@@ -161,7 +161,7 @@ def _get_family(model):
 # ---------------------------------------------------------------------------
 # Observations
 # ---------------------------------------------------------------------------
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class FitObservation:
     """One chamber's data as used by a fit (after cleaning and windowing).
 
@@ -342,7 +342,7 @@ class PermeabilityFit:
     ci: dict
     ci_method: str
     var_names: tuple
-    covariance: np.ndarray | None = field(repr=False)
+    covariance: np.ndarray | None = field(repr=False, compare=False)
     success: bool = True
     message: str = ""
     nfev: int = 0
@@ -361,7 +361,7 @@ class PermeabilityFit:
     window: tuple = ()
     error_model: str = "relative"
     elapsed: float = math.nan
-    observations: tuple = field(default=(), repr=False)
+    observations: tuple = field(default=(), repr=False, compare=False)
     family: lmfit.Model | None = field(default=None, repr=False, compare=False)
     lmfit_result: object = field(default=None, repr=False, compare=False)
     _paths: tuple = field(default=(), repr=False, compare=False)

@@ -45,7 +45,7 @@ from osmobulge.modeling.transport import (
     vtilde_from_volume_ratio,
 )
 
-__all__ = ["simulate", "VolumePath", "MechanicsRangeError", "SIMULATE_ATTRS", "ON_LIMIT"]
+__all__ = ["simulate", "VolumePath", "MechanicsRangeError", "SIMULATE_ATTRS", "ON_LIMIT", "permeability_attrs"]
 
 ON_LIMIT = ("raise", "truncate")
 
