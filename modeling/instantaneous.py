@@ -10,7 +10,7 @@ mobility at each instant gives the *instantaneous* mobility (Eqn 25, corrected):
 
 and :math:`P_w = L R T / V_m` (Eqn 2).  The printed Eqn 25 has :math:`1/V_0` where
 Eqn 8 has :math:`1/(V/V_0)`, and supplement Eqn 63 multiplies by the driving
-force instead of dividing (``docs/paper-errata.md``).
+force instead of dividing (``docs/paper-errata.md``, T1 and T2).
 
 Rates :math:`d(V/V_0)/dt` come from one of
 

@@ -25,7 +25,7 @@ where :math:`d_\pm` is the signed distance (positive outside the dome) from a
 picked point to the model meridian :math:`\Gamma` of bulge *j* in units of its
 chamber radius :math:`a_j`.  The uniaxial stress is the correctly derived one,
 :meth:`~osmobulge.modeling.materials.Material.uniaxial_stress` (supplement Eqn 61
-does not follow from Eqn 57; ``docs/paper-errata.md``).
+does not follow from Eqn 57; ``docs/paper-errata.md``, E5).
 
 All profiles of one residual evaluation are solved in a single vectorised
 shooting pass (:mod:`osmobulge.modeling._shooting`), so a fit with three bulges
