@@ -14,9 +14,11 @@ Pure numerics: dimensionless arrays in and out, no I/O.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
+
 from osmobulge.modeling import _shooting
 from osmobulge.modeling.bulge import _check_material, _check_vtilde, _solve
 from osmobulge.modeling.materials import LinearElastic
@@ -96,9 +98,46 @@ def profiles(material, vtilde, lambda_pre=1.0, *, n=401) -> ProfileBatch:
 
     Notes
     -----
+    Memoised (last 32 calls) when the material and ``lambda_pre`` are
+    hashable; the returned arrays are then read-only.
+
     Same equations and the same interpolation of the shot as
     :func:`osmobulge.modeling.bulge_profile` (main text Eqns 17-24).
     """
+    v_all = _check_vtilde(vtilde)
+    levels, inverse = np.unique(v_all, return_inverse=True)
+    key = tuple(levels.tolist())
+    try:
+        out = _profiles_cached(material, key, lambda_pre, int(n))
+    except TypeError as err:  # unhashable material or lambda_pre
+        if "unhashable" not in str(err):
+            raise
+        out = _profiles(material, levels, lambda_pre, n=n)
+    if levels.size == v_all.size and np.all(inverse == np.arange(v_all.size)):
+        return out
+    return ProfileBatch(
+        vtilde=out.vtilde[inverse],
+        lambda_pre=out.lambda_pre[inverse],
+        rho=out.rho,
+        r=out.r[inverse],
+        z=out.z[inverse],
+        thickness=out.thickness[inverse],
+        area_ratio=out.area_ratio[inverse],
+        bulge_height=out.bulge_height[inverse],
+        pressure=out.pressure[inverse],
+    )
+
+
+@functools.lru_cache(maxsize=32)
+def _profiles_cached(material, v, lambda_pre, n):
+    out = _profiles(material, np.asarray(v, float), lambda_pre, n=n)
+    for f in ("vtilde", "lambda_pre", "rho", "r", "z", "thickness", "area_ratio", "bulge_height", "pressure"):
+        getattr(out, f).setflags(write=False)
+    return out
+
+
+def _profiles(material, vtilde, lambda_pre=1.0, *, n=401) -> ProfileBatch:
+    """Uncached :func:`profiles`."""
     _check_material(material)
     if isinstance(material, LinearElastic):
         raise TypeError("profiles need a hyperelastic law; LinearElastic has no profile")

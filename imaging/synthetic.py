@@ -46,11 +46,12 @@ from dataclasses import asdict, dataclass, field, fields
 
 import numpy as np
 import xarray as xr
+from scipy import ndimage
+
 from osmobulge import __version__
 from osmobulge.imaging._profiles import profiles
-from osmobulge.imaging._raster import Layer, band_polygon, circle_polygon
+from osmobulge.imaging._raster import Layer, band_polygon, blurred_band, circle_polygon
 from osmobulge.modeling.materials import PDMS
-from scipy import ndimage
 
 __all__ = [
     "SceneGeometry",
@@ -308,8 +309,7 @@ def _chamber_tuple(chamber):
             vals = ()
         if len(vals) != 3:
             raise TypeError(
-                "chamber must be (radius_m, depth_m, thickness_m) or an osmobulge.modeling Chamber, "
-                f"got {chamber!r}"
+                f"chamber must be (radius_m, depth_m, thickness_m) or an osmobulge.modeling Chamber, got {chamber!r}"
             )
     a, h, l0 = (float(x) for x in vals)
     for name, v in (("radius", a), ("depth", h), ("thickness", l0)):
@@ -384,8 +384,11 @@ class _Scene:
         a, h, l0, big = self.a, self.h, self.l0, self.big
         nuis = self.nuis
         base, liquid, membrane = [], [], []  # lists of (poly_uw, sign)
+        domes = []  # (midline_uw, half_width): drawn as blurred bands
         base.append((np.array([[-big, -0.5 * l0], [big, -0.5 * l0], [big, -big], [-big, -big]]), 1.0))
-        chambers = [(0.0, fr.r, fr.z, fr.t, fr.lam, True)] + [(o, r, z, t, lam, False) for o, r, z, t, lam in fr.neighbours]
+        chambers = [(0.0, fr.r, fr.z, fr.t, fr.lam, True)] + [
+            (o, r, z, t, lam, False) for o, r, z, t, lam in fr.neighbours
+        ]
         chambers.sort(key=lambda c: c[0])
         gaps = []  # flat membrane intervals between rims
         left_edge = -big
@@ -419,9 +422,9 @@ class _Scene:
                 lo, hi = fr.fracture_centre - 0.5 * nuis.fracture_gap, fr.fracture_centre + 0.5 * nuis.fracture_gap
                 for sel in (s <= lo, s >= hi):
                     if sel.sum() >= 2:
-                        membrane.append((band_polygon(mid[sel], 0.5 * thick[sel]), 1.0))
+                        domes.append((mid[sel], 0.5 * thick[sel]))
             else:
-                membrane.append((band_polygon(mid, 0.5 * thick), 1.0))
+                domes.append((mid, 0.5 * thick))
             join = 0.5 * max(l0, float(thick[0]))
             membrane.append((circle_polygon(mid[0], join), 1.0))
             membrane.append((circle_polygon(mid[-1], join), 1.0))
@@ -440,14 +443,25 @@ class _Scene:
         for u0, u1 in gaps:
             if u1 > u0:
                 membrane.append((np.array([[u0, -0.5 * l0], [u1, -0.5 * l0], [u1, 0.5 * l0], [u0, 0.5 * l0]]), 1.0))
-        return base, liquid, membrane
+        return base, liquid, membrane, domes
 
-    def render(self, fr: _Frame, drift, levels):
-        """Noise-free float32 image in [0, 1] (before polarity, illumination and noise)."""
+    def render(self, fr: _Frame, drift, levels, sigma):
+        """Noise-free blurred float32 image in [0, 1] (before polarity, illumination, noise).
+
+        Base, liquid and the flat membrane are rasterised by exact area
+        coverage and blurred by a discrete Gaussian; the domes are drawn
+        afterwards as analytically blurred bands (:func:`blurred_band`), whose
+        profile across the band is symmetric about the true midline and free
+        of pixel aliasing.  Without blur (``sigma < 0.5``) the domes are exact
+        area coverage too.
+        """
         bg, lb, ll, lm = levels
-        layers = self.polygons(fr)
+        base, liquid, membrane, domes = self.polygons(fr)
+        smooth = sigma >= _MIN_ANALYTIC_SIGMA
+        if not smooth:
+            membrane = membrane + [(band_polygon(m, w), 1.0) for m, w in domes]
         covs = []
-        for polys in layers:
+        for polys in (base, liquid, membrane):
             lay = Layer(self.shape)
             for poly, sign in polys:
                 lay.add(self.to_pixels(poly, drift), sign)
@@ -457,6 +471,18 @@ class _Scene:
         img += c_base * np.float32(lb - bg)
         img += c_liq * np.float32(ll - bg)
         img += c_mem * (np.float32(lm) - img)
+        if sigma > 0:
+            img = _blur(img, sigma)
+        if smooth and domes:
+            # pixel-area sampling acts as a box of variance 1/12 on top of the PSF
+            sig_eff = math.sqrt(sigma**2 + 1.0 / 12.0)
+            cov = np.zeros(img.size, np.float32)
+            for m, w in domes:
+                idx, val = blurred_band(self.shape, self.to_pixels(m, drift), w / self.p, sig_eff)
+                cov[idx] = np.maximum(cov[idx], val)
+            flat = img.reshape(-1)
+            hit = np.flatnonzero(cov)
+            flat[hit] += cov[hit] * (np.float32(lm) - flat[hit])
         return img
 
 
@@ -477,14 +503,18 @@ def _dust(shape, nuis: Nuisances, rng):
     """Multiplicative dust transmission (float32) and the specks' parameters."""
     rows, cols = shape
     n = nuis.dust_count
-    specks = np.column_stack(
-        [
-            rng.uniform(0, cols, n),
-            rng.uniform(0, rows, n),
-            rng.uniform(nuis.dust_radius[0], nuis.dust_radius[1], n),
-            rng.uniform(0.5, 1.0, n) * nuis.dust_opacity,
-        ]
-    ) if n else np.zeros((0, 4))
+    specks = (
+        np.column_stack(
+            [
+                rng.uniform(0, cols, n),
+                rng.uniform(0, rows, n),
+                rng.uniform(nuis.dust_radius[0], nuis.dust_radius[1], n),
+                rng.uniform(0.5, 1.0, n) * nuis.dust_opacity,
+            ]
+        )
+        if n
+        else np.zeros((0, 4))
+    )
     if not n:
         return None, specks
     trans = np.ones(shape, np.float32)
@@ -501,6 +531,8 @@ def _dust(shape, nuis: Nuisances, rng):
     return trans, specks
 
 
+#: smallest PSF sigma (px) for which domes are drawn as analytically blurred bands
+_MIN_ANALYTIC_SIGMA = 0.5
 #: photons at full scale above which shot noise uses the normal approximation
 _POISSON_NORMAL = 1000.0
 
@@ -529,9 +561,7 @@ def _blur(img, sigma):
 
 
 def _finish(img, nuis: Nuisances, illum, dust, rng):
-    """Blur, polarity, dust, illumination, noise and quantisation of one frame."""
-    if nuis.blur_sigma > 0:
-        img = _blur(img, nuis.blur_sigma)
+    """Polarity, dust, illumination, noise and quantisation of one (blurred) frame."""
     if nuis.polarity < 0:
         img = 1.0 - img
     if dust is not None:
@@ -767,7 +797,10 @@ def render_series(
         return slice((k + 1) * n_t, (k + 2) * n_t)
 
     nb_v = np.array(v_nb).reshape(len(nb), n_t) if nb else np.zeros((0, n_t))
-    nb_prof = [(prof.r[rows_of(k)], prof.z[rows_of(k)], prof.thickness[rows_of(k)], prof.lambda_pre[rows_of(k)]) for k in range(len(nb))]
+    nb_prof = [
+        (prof.r[rows_of(k)], prof.z[rows_of(k)], prof.thickness[rows_of(k)], prof.lambda_pre[rows_of(k)])
+        for k in range(len(nb))
+    ]
     nb_prof = [list(map(np.array, x)) for x in nb_prof]
 
     # touching frames: grow the nearest neighbour until its band overlaps the dome
@@ -805,16 +838,36 @@ def render_series(
             z=prof.z[i],
             t=prof.thickness[i],
             lam=float(prof.lambda_pre[i]),
-            neighbours=[(off, *(x[i] for x in nb_prof[k][:3]), float(nb_prof[k][3][i])) for k, (off, _) in enumerate(nb)],
+            neighbours=[
+                (off, *(x[i] for x in nb_prof[k][:3]), float(nb_prof[k][3][i])) for k, (off, _) in enumerate(nb)
+            ],
             flag=str(flags[i]),
             fracture_centre=float(fracture_centres[i]),
         )
-        img = sc.render(fr, drift[i], levels)
+        img = sc.render(fr, drift[i], levels, nuis.blur_sigma)
         rng_noise = np.random.default_rng(np.random.SeedSequence(int(seed), spawn_key=(7, i)))
         frames[i] = _finish(img, nuis, illum, dust, rng_noise)
 
     truth = _truth(
-        v, times, prof, ref_slice, flags, drift, sc, a, h, l0, p, material, lambda_pre, nuis, scene, seed, n_truth, nb, nb_v
+        v,
+        times,
+        prof,
+        ref_slice,
+        flags,
+        drift,
+        sc,
+        a,
+        h,
+        l0,
+        p,
+        material,
+        lambda_pre,
+        nuis,
+        scene,
+        seed,
+        n_truth,
+        nb,
+        nb_v,
     )
     truth.attrs["dust_specks"] = specks.ravel() if specks.size else "none"
     return SyntheticSeries(frames=frames, truth=truth)
@@ -850,7 +903,9 @@ def _touch(frames_idx, prof, k_near, off, nb_v, nb_prof, a, l0, material, lambda
         nb_prof[k_near][3][i] = gp.lambda_pre[found]
 
 
-def _truth(v, times, prof, sl, flags, drift, sc, a, h, l0, p, material, lambda_pre, nuis, scene, seed, n_truth, nb, nb_v):
+def _truth(
+    v, times, prof, sl, flags, drift, sc, a, h, l0, p, material, lambda_pre, nuis, scene, seed, n_truth, nb, nb_v
+):
     n_t = v.size
     pr, pz, pt, arc = _resample_halves(prof, a, n_truth)
     pr, pz, pt, arc = pr[sl], pz[sl], pt[sl], arc[sl]
@@ -865,7 +920,6 @@ def _truth(v, times, prof, sl, flags, drift, sc, a, h, l0, p, material, lambda_p
         axis_xy[i] = sc.to_pixels(np.array([0.0, 0.0]), drift[i])
     lam = prof.lambda_pre[sl]
     dims = ("time",)
-    tv = {"units": "1"}
 
     def var(data, units, long_name, d=dims):
         return (d, data, {"units": units, "long_name": long_name})
@@ -895,12 +949,20 @@ def _truth(v, times, prof, sl, flags, drift, sc, a, h, l0, p, material, lambda_p
         data["neighbour_vtilde"] = var(nb_v.T.copy(), "1", "neighbour chambers' vtilde", ("time", "neighbour"))
     coords = {
         "time": ("time", np.asarray(times, float), {"units": "s", "long_name": "time since the first frame"}),
-        "s": ("s", np.linspace(0.0, 1.0, n_truth), {"units": "1", "long_name": "arc length from the pole / arc length"}),
+        "s": (
+            "s",
+            np.linspace(0.0, 1.0, n_truth),
+            {"units": "1", "long_name": "arc length from the pole / arc length"},
+        ),
         "side": ("side", np.array(["left", "right"]), {"long_name": "half of the profile"}),
         "frame": ("time", np.arange(n_t), {"units": "1", "long_name": "frame index"}),
     }
     if nb:
-        coords["neighbour_offset"] = ("neighbour", np.array([o for o, _ in nb]), {"units": "m", "long_name": "neighbour axis offset"})
+        coords["neighbour_offset"] = (
+            "neighbour",
+            np.array([o for o, _ in nb]),
+            {"units": "m", "long_name": "neighbour axis offset"},
+        )
     dt = float(np.median(np.diff(times))) if n_t > 1 else DEFAULT_FRAME_INTERVAL
     attrs = {
         "title": "synthetic cross-section micrograph series (ground truth)",
@@ -910,7 +972,9 @@ def _truth(v, times, prof, sl, flags, drift, sc, a, h, l0, p, material, lambda_p
         "chamber_depth": h,
         "membrane_thickness": l0,
         "material_law": material.law,
-        "lambda_pre_law": getattr(lambda_pre, "cache_key", repr(lambda_pre)) if callable(lambda_pre) else float(lambda_pre),
+        "lambda_pre_law": getattr(lambda_pre, "cache_key", repr(lambda_pre))
+        if callable(lambda_pre)
+        else float(lambda_pre),
         "seed": int(seed),
         "shape": np.array(sc.shape, np.int64),
         "bit_depth": int(nuis.bit_depth),
@@ -977,5 +1041,7 @@ def render_simulation(result, **kwargs) -> SyntheticSeries:
     else:
         raise ValueError("result must hold 'vtilde' or 'volume_ratio'")
     if "chamber" not in kwargs and {"chamber_radius", "chamber_depth", "membrane_thickness"} <= set(result.attrs):
-        kwargs["chamber"] = tuple(float(result.attrs[k]) for k in ("chamber_radius", "chamber_depth", "membrane_thickness"))
+        kwargs["chamber"] = tuple(
+            float(result.attrs[k]) for k in ("chamber_radius", "chamber_depth", "membrane_thickness")
+        )
     return render_series(np.clip(v, 0.0, None), times=times, **kwargs)
