@@ -99,7 +99,7 @@ class TraceSettings:
     min_contrast: float = 0.25
     gap_flag: float = 1.5
     delamination_flag: float = 0.5
-    touching_flag: float = 2.0
+    touching_flag: float = 1.5
     residual_flag: float = 1.0
     asymmetry_flag: float = 0.08
     max_drift: float = 40.0
@@ -655,26 +655,66 @@ class ChamberTracer:
         return fig
 
     def _neighbour_gap(self, view, g, tr):
-        st = self.settings
-        pts, nrm, lo, hi, good, excl = (tr[k] for k in ("station_pts", "normals", "lo", "hi", "good", "excluded"))
-        use = good & ~excl & np.isfinite(lo) & np.isfinite(hi)
-        if use.sum() < 10:
+        """Gap (px) between the dome's band and the nearest *other* long membrane (a neighbour's bulge).
+
+        Membrane-like pixels around the dome (background-flattened contrast above
+        half the dome's own), minus the dome's band, the flat band and the base,
+        are grouped into connected pieces; pieces shorter than twice the membrane
+        thickness (dust) are ignored.  The figure is the smallest distance from
+        the dome's midline to a remaining piece, less the dome's half-width.
+        """
+        from scipy.spatial import cKDTree
+
+        f = 2
+        u, z = tr["u"], tr["z"]
+        pts = g.line.point(u, z)
+        reach = 2.0 * g.thickness + 4.0 * self.blur + 10.0
+        (c0, r0), (c1, r1) = np.floor(pts.min(axis=0) - reach), np.ceil(pts.max(axis=0) + reach)
+        patch, (pr0, pc0) = view.patch(r0, r1, c0, c1)
+        hh, ww = patch.shape[0] // f * f, patch.shape[1] // f * f
+        if hh < 8 or ww < 8:
             return np.inf
-        depth = max(2.0 * g.thickness, 20.0) + 2.5 * self.blur
-        offs = np.arange(1.5 + 2.5 * self.blur, depth, 1.0)
-        gaps = []
-        for sgn, edge in ((1.0, hi), (-1.0, lo)):
-            start = pts[use] + edge[use, None] * nrm[use]
-            x = start[:, 0:1] + sgn * offs[None, :] * nrm[use, 0:1]
-            y = start[:, 1:2] + sgn * offs[None, :] * nrm[use, 1:2]
-            prof = view.sample(x, y)
-            base = _nanmedian(prof[:, -6:], axis=1, keepdims=True)
-            q = g.polarity * (base - prof) / max(abs(g.contrast), 1e-9)
-            _, zz = g.line.coords(np.c_[x.ravel(), y.ravel()])
-            hit = (q > 0.3) & (zz.reshape(x.shape) > g.thickness + 2.0)
-            first = np.where(hit.any(axis=1), np.argmax(hit, axis=1), len(offs) - 1)
-            gaps.append(offs[first] - offs[0])
-        return float(min(_sustained_min(gap, 25) for gap in gaps))
+        img = patch[:hh, :ww].reshape(hh // f, f, ww // f, f).mean(axis=(1, 3))
+        bg = ndi.gaussian_filter(img, 12.0, mode="nearest")
+        con = g.polarity * (bg - img) / max(abs(g.contrast), 1e-9)
+        dome_con = float(_nanmedian(tr["contrast"][~tr["excluded"]])) / max(abs(g.contrast), 1e-9)
+        mask = con > max(0.5 * dome_con, 0.1)
+        yy, xx = np.nonzero(mask)
+        if yy.size == 0:
+            return np.inf
+        vx = pc0 + f * xx + (f - 1) / 2.0
+        vy = pr0 + f * yy + (f - 1) / 2.0
+        pu, pz = g.line.coords(np.c_[vx, vy])
+        tree = cKDTree(pts)
+        dist, idx = tree.query(np.c_[vx, vy])
+        half = np.interp(
+            np.arange(len(u)),
+            np.linspace(0, len(u) - 1, len(tr["width"])),
+            np.nan_to_num(ndi.median_filter(np.nan_to_num(tr["width"], nan=0.0), 21), nan=0.0),
+        )
+        excl_r = 0.5 * half[idx] + 1.5 * self.blur + 2.0 + f
+        own = dist <= excl_r
+        flat = pz < g.thickness + 2.0 * self.blur + 2.0
+        keep = ~own & ~flat & (dist <= reach)
+        if not keep.any():
+            return np.inf
+        lab = np.zeros(mask.shape, np.int32)
+        sub = np.zeros(mask.shape, bool)
+        sub[yy[keep], xx[keep]] = True
+        lab, n = ndi.label(sub, structure=np.ones((3, 3)))
+        if n == 0:
+            return np.inf
+        objs = ndi.find_objects(lab)
+        long_ = np.zeros(n + 1, bool)
+        min_len = max(2.0 * g.thickness, 30.0) / f
+        for k, sl in enumerate(objs, start=1):
+            if sl is not None and np.hypot(sl[0].stop - sl[0].start, sl[1].stop - sl[1].start) >= min_len:
+                long_[k] = True
+        sel = keep & long_[lab[yy, xx]]
+        if not sel.any():
+            return np.inf
+        # 0 when a foreign membrane reaches the edge of the dome's own band
+        return float(max(np.min(dist[sel] - excl_r[sel]), 0.0))
 
     def _flag(self, fig):
         st = self.settings
@@ -759,9 +799,9 @@ class ChamberTracer:
         out.volume_left, out.volume_right = m.volume_left, m.volume_right
         out.area_left, out.area_right = m.area_left, m.area_right
         out.height = m.height
-        # relative to the volume, but never to less than a half-pixel layer over the well
+        # relative to the volume, but never to less than a 5 px layer over the well (a flat membrane)
         g = out.geometry
-        floor = 0.5 * np.pi * g.rim_radius**2 if g is not None else 0.0
+        floor = 5.0 * np.pi * g.rim_radius**2 if g is not None else 0.0
         out.figures["volume_disagreement"] = float(abs(m.volume_left - m.volume_right) / max(abs(m.volume), floor,
                                                                                             1e-300))
 
