@@ -215,7 +215,7 @@ class ChamberTracer:
         c1, r1 = np.ceil(corners.max(axis=0)).astype(int) + 1
         self._patch_box = (r0, r1, c0, c1)
         ref_patch, _ = view.patch(r0, r1, c0, c1)
-        self._ref_patch = ref_patch - ndi.gaussian_filter(ref_patch, 8.0, mode="nearest")
+        self._ref_patch = self._highpass(ref_patch)
         # sign of (liquid - base) grey levels: the left wall steps by this sign going right
         zmid = top - 0.4 * depth
         pl = g.line.point(np.array([-0.5 * g.rim_radius, -g.rim_radius - 3 * g.thickness]), zmid)
@@ -267,12 +267,19 @@ class ChamberTracer:
         r0, r1, c0, c1 = self._patch_box
         dx, dy = np.round(self._drift).astype(int)
         cur, _ = view.patch(r0 + dy, r1 + dy, c0 + dx, c1 + dx)
-        if cur.shape != self._ref_patch.shape:
+        if (cur.shape[0] // 2, cur.shape[1] // 2) != self._ref_patch.shape:
             return self._drift.copy()
-        cur = cur - ndi.gaussian_filter(cur, 8.0, mode="nearest")
+        cur = self._highpass(cur)
         shift, _, _ = phase_cross_correlation(self._ref_patch, cur, upsample_factor=1, normalization=None)
-        # the shift registers the current patch onto the reference one
-        return np.array([dx - shift[1], dy - shift[0]], float)
+        # the shift registers the current patch onto the reference one (2x downsampled)
+        return np.array([dx - 2 * shift[1], dy - 2 * shift[0]], float)
+
+    @staticmethod
+    def _highpass(patch):
+        """2x block mean minus a smooth background (removes uneven illumination)."""
+        h, w = patch.shape[0] // 2 * 2, patch.shape[1] // 2 * 2
+        p = patch[:h, :w].reshape(h // 2, 2, w // 2, 2).mean(axis=(1, 3))
+        return p - ndi.uniform_filter(p, 9, mode="nearest")
 
     def _coarse_line(self, view, line):
         """Move the predicted line onto the band with a wide box-filter search (robust to bad drift)."""
@@ -391,42 +398,43 @@ class ChamberTracer:
         """One pass along the guide's normals: band midline offsets and station data."""
         st = self.settings
         guide = g.line.point(guide_uz[:, 0], guide_uz[:, 1])
-        pts, s = resample_polyline(guide, st.station_step)
-        nrm = polyline_normals(pts, smooth=2.0)
+        # the wide dynamic-programming pass samples twice as coarsely as the final ones
+        step, sstep = (2.0 * st.station_step, 2.0 * st.sample_step) if dp else (st.station_step, st.sample_step)
+        pts, s = resample_polyline(guide, step)
+        nrm = polyline_normals(pts, smooth=2.0 / step)
         # normals point to the left of travel; travel is left rim -> right rim, so "left" is outward (up)
         w = half + 0.5 * g.thickness
-        offs = np.arange(-w, w + 1e-9, st.sample_step)
+        offs = np.arange(-w, w + 1e-9, sstep)
         x = pts[:, 0:1] + offs[None, :] * nrm[:, 0:1]
         y = pts[:, 1:2] + offs[None, :] * nrm[:, 1:2]
         prof = view.sample(x, y)
         if not np.all(np.isfinite(prof)):
             prof = np.where(np.isfinite(prof), prof, _nanmedian(prof))
-        prof = ndi.gaussian_filter1d(prof, 1.0, axis=0, mode="nearest")
+        prof = ndi.gaussian_filter1d(prof, 1.0 / step, axis=0, mode="nearest")
         if dp:
             q = g.polarity * (np.median(prof, axis=1, keepdims=True) - prof)
-            dec = max(1, int(round(3.0 / st.station_step)))
-            sub = max(1, int(round(1.0 / st.sample_step)))
+            dec = max(1, int(round(3.0 / step)))
+            sub = max(1, int(round(1.0 / sstep)))
             # cap the score at the membrane's typical contrast: a dark speck (dust) can then
             # score no more than the membrane, and the smooth path does not detour to it
             # (a running median along the curve, so a faint thin pole is capped at its own level)
             cap = ndi.median_filter(q.max(axis=1), 41, mode="nearest")
             cap = np.maximum(cap, 1e-12 + 0.05 * float(np.median(cap)))
             sc = (q / cap[:, None])[::dec, ::sub]
-            path = viterbi_path(np.clip(sc, -0.5, 1.0), max_step=max(1, int(round(dec * st.station_step))),
-                                penalty=0.3)
+            path = viterbi_path(np.clip(sc, -0.5, 1.0), max_step=max(1, int(round(dec * step))), penalty=0.3)
             centre = np.interp(np.arange(len(q)), np.arange(0, len(q), dec)[: len(path)], path * sub)
             centre = centre.round().astype(int)
             # the path lies inside the band (thick or thin): look for the peak only close to it
-            search = int(round((2.0 + 1.5 * self.blur) / st.sample_step))
+            search = int(round((2.0 + 1.5 * self.blur) / sstep))
         else:
             centre = np.full(len(prof), len(offs) // 2)
             if width is None:
-                search = int(round((0.5 * g.thickness + half) / st.sample_step))
+                search = int(round((0.5 * g.thickness + half) / sstep))
             else:  # the peak lies within the band's own half-width of the guide (never on a nearby speck)
                 wi = np.interp(s, width[0], width[1])
-                search = np.round((0.5 * wi + 2.0 + 1.5 * self.blur) / st.sample_step).astype(int)
+                search = np.round((0.5 * wi + 2.0 + 1.5 * self.blur) / sstep).astype(int)
         mid, lo, hi, con, width = band_edges(prof, offs, g.polarity, centre=centre, search=search,
-                                             side=max(2, int(1.5 / st.sample_step)))
+                                             side=max(2, int(1.5 / sstep)))
         return {"mid": mid, "lo": lo, "hi": hi, "contrast": con, "width": width, "stations": s,
                 "station_pts": pts, "normals": nrm, "half": w}
 
@@ -533,24 +541,41 @@ class ChamberTracer:
         return np.c_[side * R + side * rr * np.cos(tt), rr * np.sin(tt)]
 
     @staticmethod
-    def _robust_fit(U, Z, ks, *, pinned=True):
+    def _lsq(u, pts, w, spacing):
+        """Least-squares cubic spline of pts (N, 2) over parameter u with knots at data quantiles."""
+        from scipy.interpolate import make_lsq_spline
+
+        sel = w > 0
+        chord = float(np.sum(np.hypot(*np.diff(pts[sel], axis=0).T)))
+        n_int = int(np.clip(np.floor(chord / spacing), 0, max(int(sel.sum()) - 4, 0)))
+        inner = np.quantile(u[sel][1:-1], np.linspace(0.0, 1.0, n_int + 2)[1:-1]) if n_int else np.zeros(0)
+        t = np.r_[[u[0]] * 4, inner, [u[-1]] * 4]
+        return make_lsq_spline(u, pts, t, k=3, w=w)
+
+    @classmethod
+    def _robust_fit(cls, U, Z, ks, *, pinned=True, final=True):
         """Spline through (U, Z) rejecting outliers (dust bumps) against a stiff spline first.
 
-        The ends are pinned (weight 10) when ``pinned``.  Returns the final spline
-        (knots ``ks`` apart) and the mask of kept points.
+        The ends are pinned (weight 10) when ``pinned``.  Returns the final
+        :class:`~osmobulge.imaging.geometry.ProfileSpline` (knots ``ks`` apart; or
+        the stiff spline sampled every pixel when ``final`` is False) and the
+        mask of kept points.
         """
+        pts = np.c_[U, Z]
         n = len(U)
+        seg = np.hypot(*np.diff(pts, axis=0).T)
+        u = np.r_[0.0, np.cumsum(np.maximum(seg, 1e-9))]
         wts = np.ones(n)
-        if pinned:
-            wts[[0, -1]] = 10.0
-        keep = np.ones(n, bool)
         inner = np.ones(n, bool)
         if pinned:
+            wts[[0, -1]] = 10.0
             inner[[0, -1]] = False
-        for spacing, floor, iters in ((max(15.0, 2.5 * ks), 1.0, 4), (ks, 0.75, 2)):
+        keep = np.ones(n, bool)
+        stages = ((max(15.0, 2.5 * ks), 1.0, 3),) + (((ks, 0.75, 1),) if final else ())
+        for spacing, floor, iters in stages:
             for _ in range(iters):
-                spl = smooth_profile(np.c_[U, Z], knot_spacing=spacing, weights=np.where(keep, wts, 0.0))
-                res = spl.residuals
+                spl = cls._lsq(u, pts, np.where(keep, wts, 0.0), spacing)
+                res = np.hypot(*(spl(u) - pts).T)
                 sel = keep & inner
                 mad = 1.4826 * float(np.median(res[sel])) if sel.any() else 0.0
                 new = np.isfinite(res) & (res <= max(3.5 * mad, floor))
@@ -559,16 +584,17 @@ class ChamberTracer:
                 if np.array_equal(new, keep) or new.sum() < 6:
                     break
                 keep = new
-        spl = smooth_profile(np.c_[U, Z], knot_spacing=ks, weights=np.where(keep, wts, 0.0))
-        return spl, keep
+        if not final:
+            return spl(np.linspace(u[0], u[-1], max(int(u[-1]), 2))), keep
+        return smooth_profile(pts, knot_spacing=ks, weights=np.where(keep, wts, 0.0)), keep
 
     def _guide_from(self, g, r, ks):
         R = g.rim_radius
         use = r["use"]
         U = np.r_[-R, r["pu"][use], R]
         Z = np.r_[0.0, r["pz"][use], 0.0]
-        spl, _ = self._robust_fit(U, Z, max(ks, 8.0))
-        return spl.sample(step=1.0)[1]
+        curve, _ = self._robust_fit(U, Z, max(ks, 8.0), final=False)
+        return curve
 
     def _passes(self, view, g, guide_uz, half):
         st = self.settings
@@ -665,7 +691,8 @@ class ChamberTracer:
         """
         from scipy.spatial import cKDTree
 
-        f = 2
+        f = 3
+
         u, z = tr["u"], tr["z"]
         pts = g.line.point(u, z)
         reach = 2.0 * g.thickness + 4.0 * self.blur + 10.0
