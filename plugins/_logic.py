@@ -57,6 +57,8 @@ __all__ = [
 
 #: membrane contrast: +1 dark band on a light background, -1 bright band, or detect it
 POLARITIES = ("auto", 1, -1)
+#: how the end (rim) points are snapped
+SNAP_ENDS = ("flat", "normal")
 #: bulge directions in the image, and the unit ``(dcol, drow)`` vector of each
 BULGE_DIRECTIONS = {"up": (0.0, -1.0), "down": (0.0, 1.0), "left": (-1.0, 0.0), "right": (1.0, 0.0)}
 
@@ -139,7 +141,8 @@ def order_along_curve(points_rc) -> np.ndarray:
     Returns
     -------
     ndarray of int, shape (N,)
-        Permutation putting the points in order from one end of the curve to the other.
+        Permutation putting the points in order from one end of the curve to the
+        other, starting at the end with the smaller column (then row).
 
     Notes
     -----
@@ -172,7 +175,11 @@ def order_along_curve(points_rc) -> np.ndarray:
         before = dist[i, order[k - 1]] if k > 0 else np.inf
         after = dist[i, order[k + 1]] if k + 1 < len(order) else np.inf
         order.insert(k if before < after else k + 1, i)
-    return np.asarray(order)
+    order = np.asarray(order)
+    # a fixed direction: from the end with the smaller column (then row) to the other
+    if tuple(p[order[-1], ::-1]) < tuple(p[order[0], ::-1]):
+        order = order[::-1]
+    return order
 
 
 # --------------------------------------------------------------------------- chamber frame
@@ -402,14 +409,16 @@ class SnapResult:
     polarity: int
 
 
-def _normals_rc(points_rc, up):
-    """Unit normals ``(dcol, drow)`` of the curve through the points (in the given order)."""
+def _normals_rc(points_rc, up, ends="flat"):
+    """Unit search directions ``(dcol, drow)``: the curve's normals (the ends along ``up`` if ``ends="flat"``)."""
     p = np.asarray(points_rc, float)
     if len(p) == 1:
         return np.array([up], float)
     order = order_along_curve(p)
     xy = p[order][:, ::-1]
     nrm = polyline_normals(xy, smooth=0.0)
+    if ends == "flat" and len(p) >= 3:
+        nrm[[0, -1]] = np.asarray(up, float)
     out = np.empty_like(nrm)
     out[order] = nrm
     return out
@@ -430,7 +439,7 @@ def _pixel_noise(img, points_rc, margin):
 
 
 def snap_points(image, points_rc, *, search: float = 6.0, step: float = 0.25, polarity="auto",
-                up=(0.0, -1.0), passes: int = 2, min_snr: float = 8.0) -> SnapResult:
+                up=(0.0, -1.0), ends: str = "flat", passes: int = 2, min_snr: float = 8.0) -> SnapResult:
     """Move picked points onto the midline of the membrane band, with sub-pixel accuracy.
 
     Parameters
@@ -447,7 +456,12 @@ def snap_points(image, points_rc, *, search: float = 6.0, step: float = 0.25, po
         +1 dark membrane on a light background, -1 bright; ``"auto"`` takes the
         sign with the larger median band contrast.
     up : tuple of float
-        Search direction ``(dcol, drow)`` for a single point (the normal of a flat membrane).
+        Bulge direction ``(dcol, drow)``: the normal of the flat membrane.
+    ends : {"flat", "normal"}
+        How the two end points of the curve (the rim points) are snapped: ``"flat"``
+        along ``up`` onto the flat membrane band they sit on (at the rim the dome's
+        band meets the flat band, so the curve's normal there is ambiguous), or
+        along the curve's normal like the other points.
     passes : int
         Snapping passes; each pass after the first searches along the normals of
         the curve through the points snapped so far.
@@ -470,6 +484,8 @@ def snap_points(image, points_rc, *, search: float = 6.0, step: float = 0.25, po
     """
     if polarity not in POLARITIES:
         raise ValueError(f"polarity must be one of {POLARITIES}, got {polarity!r}")
+    if ends not in SNAP_ENDS:
+        raise ValueError(f"ends must be one of {SNAP_ENDS}, got {ends!r}")
     if not (search > 0 and step > 0 and step < search):
         raise ValueError(f"search and step must be positive px with step < search, got {search!r}, {step!r}")
     img = np.asarray(image, dtype=np.float64)
@@ -486,7 +502,7 @@ def snap_points(image, points_rc, *, search: float = 6.0, step: float = 0.25, po
     for _ in range(max(int(passes), 1)):
         # normals of the curve through the current points: the second pass uses the snapped
         # points, whose normals are those of the membrane rather than of the clicks' scatter
-        nrm = _normals_rc(current, up)
+        nrm = _normals_rc(current, up, ends)
         profiles = sample_normals(img, current[:, ::-1], nrm, offsets)
         results = {}
         for pol in pols:
@@ -504,3 +520,63 @@ def snap_points(image, points_rc, *, search: float = 6.0, step: float = 0.25, po
     snapped = current
     shift = np.linalg.norm(snapped - p, axis=1)
     return SnapResult(points_rc=snapped, moved=shift, snapped=ok, polarity=int(pol))
+
+
+# --------------------------------------------------------------------------- chamber regions
+def regions_to_rectangles(regions) -> list[np.ndarray]:
+    """Chamber regions ``{"name", "rows": [r0, r1], "cols": [c0, c1]}`` -> napari rectangles.
+
+    Parameters
+    ----------
+    regions : sequence of dict
+        Pixel regions (stop excluded), as in the curation and ``experiment.toml``.
+
+    Returns
+    -------
+    list of ndarray of shape (4, 2)
+        Corners ``(row, col)`` of each rectangle (pixel edges: ``r0 - 0.5`` to ``r1 - 0.5``).
+    """
+    out = []
+    for r in regions:
+        (r0, r1), (c0, c1) = r["rows"], r["cols"]
+        out.append(np.array([[r0, c0], [r0, c1], [r1, c1], [r1, c0]], float) - 0.5)
+    return out
+
+
+def rectangles_to_regions(rectangles, names=None, *, shape=None) -> list[dict]:
+    """napari rectangles -> chamber regions (inverse of :func:`regions_to_rectangles`).
+
+    Parameters
+    ----------
+    rectangles : sequence of array_like of shape (4, 2) or (4, 3)
+        Corners ``([frame,] row, col)``; the bounding box of each is used.
+    names : sequence of str, optional
+        Region names (default ``chamber0``, ``chamber1``, ... from left to right).
+    shape : tuple of int, optional
+        ``(H, W)`` of the frames: regions are clipped to it.
+
+    Returns
+    -------
+    list of dict
+        ``{"name", "rows": [r0, r1], "cols": [c0, c1]}``, integer pixel bounds, stop excluded.
+    """
+    boxes = []
+    for rect in rectangles:
+        p = np.asarray(rect, float)[:, -2:]
+        lo = np.rint(p.min(axis=0) + 0.5).astype(int)
+        hi = np.rint(p.max(axis=0) + 0.5).astype(int)
+        lo = np.maximum(lo, 0)
+        if shape is not None:
+            hi = np.minimum(hi, shape)
+        if np.any(hi <= lo):
+            raise ValueError(f"rectangle {p.tolist()} is empty inside the frame")
+        boxes.append((lo, hi))
+    if names is None:
+        order = np.argsort([b[0][1] for b in boxes], kind="stable")
+        names = [None] * len(boxes)
+        for k, i in enumerate(order):
+            names[i] = f"chamber{k}"
+    if len(names) != len(boxes):
+        raise ValueError(f"names: expected {len(boxes)} names, got {len(names)}")
+    return [{"name": str(n), "rows": [int(lo[0]), int(hi[0])], "cols": [int(lo[1]), int(hi[1])]}
+            for n, (lo, hi) in zip(names, boxes, strict=True)]

@@ -56,14 +56,15 @@ def test_order_along_curve_recovers_shuffled_clicks(h_over_a):
     perm = rng.permutation(len(pts))
     order = L.order_along_curve(pts[perm])
     recovered = perm[order]
-    assert list(recovered) in (list(range(len(pts))), list(range(len(pts)))[::-1])
+    # the points run rim to rim from the left (smaller column) end
+    assert list(recovered) == list(range(len(pts)))
 
 
 def test_order_inserts_off_path_point():
     pts = np.array([[0, 0], [0, 10], [0, 20], [0, 30], [1.0, 14.0]])
     order = L.order_along_curve(pts)
     cols = pts[order][:, 1]
-    assert list(cols) in ([0, 10, 14, 20, 30], [30, 20, 14, 10, 0])
+    assert list(cols) == [0, 10, 14, 20, 30]
 
 
 @pytest.mark.parametrize(("h_over_a", "tilt"), [(0.4, 0.0), (1.0, 0.03), (1.6, -0.05)])
@@ -141,13 +142,28 @@ def test_snap_points_lands_on_the_true_midline(synthetic_frame):
     clicked = truth[idx] + rng.uniform(-3, 3, size=(len(idx), 2))
     clicked = clicked[rng.permutation(len(idx))]  # click order does not matter
     before = _segment_distance(clicked, truth)
-    res = L.snap_points(frame, clicked)
+    res = L.snap_points(frame, clicked, ends="normal")
     after = _segment_distance(res.points_rc, truth)
     assert res.polarity == polarity
     assert res.snapped.all()
     assert before.max() > 1.5
     assert after.max() < 0.25, after  # sub-pixel
     np.testing.assert_allclose(res.moved, np.linalg.norm(res.points_rc - clicked, axis=1), atol=1e-12)
+
+
+def test_snap_rim_to_rim_clicks(synthetic_frame):
+    """Clicks from rim to rim: the ends snap along the flat membrane's normal onto the rim line."""
+    frame, truth, _ = synthetic_frame
+    idx = np.linspace(0, len(truth) - 1, 13).astype(int)
+    rng = np.random.default_rng(6)
+    clicked = truth[idx] + rng.uniform(-2, 2, size=(len(idx), 2))
+    res = L.snap_points(frame, clicked)
+    assert res.snapped.all()
+    assert _segment_distance(res.points_rc[1:-1], truth).max() < 0.25
+    # the rows of the rim ends: on the rim line within 0.75 px (the dome's band starts there)
+    np.testing.assert_allclose(res.points_rc[[0, -1], 0], truth[[0, -1], 0], atol=0.75)
+    # columns are not moved by a vertical snap
+    np.testing.assert_allclose(res.points_rc[[0, -1], 1], clicked[[0, -1], 1])
 
 
 def test_snap_points_far_from_any_band_stay(synthetic_frame):
@@ -164,6 +180,8 @@ def test_snap_points_validation():
         L.snap_points(img, [[1, 1]], polarity=2)
     with pytest.raises(ValueError, match="search and step"):
         L.snap_points(img, [[1, 1]], search=1.0, step=2.0)
+    with pytest.raises(ValueError, match="ends must be one of"):
+        L.snap_points(img, [[1, 1]], ends="rim")
     with pytest.raises(ValueError, match="2-D"):
         L.snap_points(np.zeros((2, 10, 10)), [[1, 1]])
     assert L.snap_points(img, np.empty((0, 2))).points_rc.shape == (0, 2)

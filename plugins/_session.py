@@ -1,0 +1,553 @@
+"""The curation session: one experiment folder open for review (Qt-free).
+
+:class:`CurationSession` holds what the napari widgets show and forwards every
+decision to :mod:`osmobulge.experiments.curation`, which saves it atomically
+(``DIR/curation.json``).  It runs without Qt, so scripts and tests drive it
+directly::
+
+    s = CurationSession("my-experiment")
+    s.set_picks(12, clicked_points_rc)       # snapped to the membrane, fitted live
+    s.accept(12)                             # manual profile saved (source = "manual")
+    s.exclude(20, "delaminated")
+    s.volume_series()                        # V/V0(t) with the decisions applied
+
+See :mod:`osmobulge.plugins._logic` for the coordinate conventions.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import tempfile
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+from osmobulge.experiments import curation as cur_api
+from osmobulge.experiments.metadata import load_experiment
+from osmobulge.plugins._logic import (
+    BULGE_DIRECTIONS,
+    ChamberGeometry,
+    ProfileFit,
+    fit_picked_profile,
+    order_along_curve,
+    points_m_to_rc,
+    points_rc_to_m,
+    snap_points,
+)
+
+__all__ = ["CurationSession", "EXTRACTION_FILE", "open_frames"]
+
+EXTRACTION_FILE = Path("results") / "extraction.nc"
+
+
+# --------------------------------------------------------------------------- frames
+def open_frames(exp):
+    """The experiment's frames as a lazy ``(T, H, W)`` array, plus pixel size and times from the files.
+
+    Parameters
+    ----------
+    exp : osmobulge.experiments.metadata.Experiment
+
+    Returns
+    -------
+    frames : array_like of shape (T, H, W)
+        Lazy (dask) array: a frame is read when napari shows it.
+    pixel_size : float or None, m
+        From the files' metadata, if any.
+    times : ndarray of shape (T,) or None, s
+        From the files' metadata, if any.
+    """
+    try:
+        from osmobulge.imaging import io as imio
+    except ImportError:  # the imaging readers are not there yet: plain TIFF files
+        imio = None
+    if imio is not None and hasattr(imio, "open_series"):
+        series = imio.open_series(exp.frames_source())
+        return series.to_dask(), series.pixel_size, series.timestamps
+    return _open_tiffs(exp.frame_files()), None, None
+
+
+def _open_tiffs(files):
+    import dask
+    import dask.array as da
+    import tifffile
+
+    files = list(files)
+    if len(files) == 1:
+        store = tifffile.imread(files[0], aszarr=True)
+        arr = da.from_zarr(store)
+        return arr if arr.ndim == 3 else arr[None]
+    first = tifffile.imread(files[0])
+    parts = [da.from_delayed(dask.delayed(tifffile.imread)(f), shape=first.shape, dtype=first.dtype) for f in files]
+    return da.stack(parts)
+
+
+# --------------------------------------------------------------------------- session
+class CurationSession:
+    """Review state of one experiment: frames, automatic profiles, picks, decisions.
+
+    Parameters
+    ----------
+    folder : path
+        Experiment folder (with ``experiment.toml``).
+    chamber : int, optional
+        Which chamber of a field holding several (index along the extraction's
+        ``chamber`` dimension).
+
+    Attributes
+    ----------
+    folder : pathlib.Path
+    experiment : osmobulge.experiments.metadata.Experiment
+    frames : array_like of shape (T, H, W)
+        Lazy frame stack.
+    pixel_size : float, m
+    times : ndarray of shape (T,), s
+        Frame clock (not shifted by the time origin).
+    curation : osmobulge.experiments.curation.Curation
+        As last saved.
+    extraction : xarray.Dataset or None
+        ``DIR/results/extraction.nc`` (loaded into memory), if processed.
+    picks : dict of int to ndarray of shape (N, 2), px
+        Points per frame, ``(row, col)``: the accepted manual profiles, then the
+        user's edits (not saved until :meth:`accept`).
+    """
+
+    def __init__(self, folder, *, chamber: int = 0):
+        self.folder = Path(folder)
+        self.experiment = load_experiment(self.folder)
+        self.frames, file_pixel, file_times = open_frames(self.experiment)
+        im = self.experiment.imaging
+        pixel = im.pixel_size if im.pixel_size is not None else file_pixel
+        if pixel is None:
+            raise ValueError(f"{self.folder}: no pixel size in experiment.toml ([imaging] pixel_size_um) "
+                             "nor in the frame files")
+        self.pixel_size = float(pixel)
+        self.n_frames = int(self.frames.shape[0])
+        self.times = self._frame_times(file_times)
+        self.chamber = int(chamber)
+        self.up = BULGE_DIRECTIONS.get(im.bulge_direction, BULGE_DIRECTIONS["up"])
+        self.curation = cur_api.load_curation(self.folder)
+        self.extraction = None
+        self.reload_extraction()
+        self.picks: dict[int, np.ndarray] = {}
+        self._fits: dict[int, ProfileFit] = {}
+        self._accepted: dict[int, ProfileFit] = {}
+        for f, v in self.curation.manual_profiles.items():
+            self.picks[int(f)] = points_m_to_rc(v["points"], self.pixel_size)
+        self.listeners: list[Callable[[str, int | None], None]] = []
+
+    # ------------------------------------------------------------------ basics
+    def _frame_times(self, file_times) -> np.ndarray:
+        im = self.experiment.imaging
+        if im.timestamps is not None:
+            t = np.asarray(im.timestamps, float)
+        elif im.frame_interval is not None:
+            t = np.arange(self.n_frames) * float(im.frame_interval)
+        elif file_times is not None:
+            t = np.asarray(file_times, float)
+        else:
+            t = np.arange(self.n_frames, dtype=float)
+        if t.shape != (self.n_frames,):
+            raise ValueError(f"{self.folder}: {t.size} frame times for {self.n_frames} frames")
+        return t
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """Frame shape ``(H, W)``, px."""
+        return tuple(int(n) for n in self.frames.shape[1:])
+
+    @property
+    def chamber_volume(self) -> float:
+        """Initial chamber volume :math:`V_0 = \\pi a^2 h`, m**3 (denominator of V/V0)."""
+        return float(self.experiment.chamber.to_chamber().volume)
+
+    def check_frame(self, frame) -> int:
+        """Validate a frame index; returns it as int."""
+        if isinstance(frame, bool) or not isinstance(frame, int | np.integer) or not 0 <= frame < self.n_frames:
+            raise ValueError(f"frame = {frame!r}: expected an integer in [0, {self.n_frames - 1}]")
+        return int(frame)
+
+    def frame(self, frame: int) -> np.ndarray:
+        """One frame as an in-memory array (H, W)."""
+        return np.asarray(self.frames[self.check_frame(frame)])
+
+    def _emit(self, what: str, frame: int | None = None) -> None:
+        for cb in list(self.listeners):
+            cb(what, frame)
+
+    # ------------------------------------------------------------------ extraction
+    def reload_extraction(self) -> None:
+        """(Re)load ``results/extraction.nc`` if it exists."""
+        path = self.folder / EXTRACTION_FILE
+        if not path.is_file():
+            self.extraction = None
+            return
+        import xarray as xr
+
+        with xr.open_dataset(path, engine="h5netcdf") as ds:
+            self.extraction = ds.load()
+        self._emit("extraction")
+
+    def _ds_frame(self, frame: int):
+        """The extraction's entry for a frame (and chamber), or None."""
+        ds = self.extraction
+        if ds is None:
+            return None
+        if "frame" in ds.variables:
+            pos = np.flatnonzero(np.asarray(ds["frame"].values).astype(int) == frame)
+            if pos.size == 0:
+                return None
+            sub = ds.isel(time=int(pos[0]))
+        elif frame < ds.sizes.get("time", 0):
+            sub = ds.isel(time=frame)
+        else:
+            return None
+        if "chamber" in sub.dims:
+            sub = sub.isel(chamber=self.chamber)
+        return sub
+
+    def flag(self, frame: int) -> str | None:
+        """The automatic quality flag of a frame (None before processing)."""
+        sub = self._ds_frame(self.check_frame(frame))
+        if sub is None or "flag" not in sub:
+            return None
+        return str(sub["flag"].values)
+
+    def auto_profile_rc(self, frame: int) -> np.ndarray | None:
+        """The extraction's traced profile of a frame, ``(row, col)`` px, ordered rim to rim."""
+        sub = self._ds_frame(self.check_frame(frame))
+        if sub is None:
+            return None
+        for xs, ys, scale in (("profile_col", "profile_row", 1.0), ("profile_x", "profile_y", 1.0 / self.pixel_size)):
+            if xs in sub and ys in sub:
+                x = np.asarray(sub[xs].values, float).ravel() * scale
+                y = np.asarray(sub[ys].values, float).ravel() * scale
+                ok = np.isfinite(x) & np.isfinite(y)
+                return np.c_[y[ok], x[ok]] if ok.any() else None
+        return None
+
+    def geometry(self, frame: int) -> ChamberGeometry | None:
+        """The chamber frame the extraction measured in a frame (None if unknown)."""
+        sub = self._ds_frame(self.check_frame(frame))
+        if sub is None or not {"axis_col", "axis_row"} <= set(sub.variables):
+            return None
+        ax, ay = float(sub["axis_col"].values), float(sub["axis_row"].values)
+        if not (np.isfinite(ax) and np.isfinite(ay)):
+            return None
+        tilt = float(sub["tilt"].values) if "tilt" in sub else 0.0
+        tilt = np.deg2rad(tilt) if sub.get("tilt") is not None and sub["tilt"].attrs.get("units") == "deg" else tilt
+        up = self.up
+        if "bulge_direction" in self.extraction.attrs:
+            up = BULGE_DIRECTIONS.get(str(self.extraction.attrs["bulge_direction"]), up)
+        return ChamberGeometry(axis_point=(ax, ay), angle=tilt if np.isfinite(tilt) else 0.0, up=up,
+                               source="extraction")
+
+    # ------------------------------------------------------------------ picking
+    def set_picks(self, frame: int, points_rc, *, snap: bool = True, search: float = 6.0) -> ProfileFit:
+        """Replace a frame's picked points (optionally snapped to the membrane) and refit.
+
+        Parameters
+        ----------
+        frame : int
+        points_rc : array_like of shape (N, 2), px
+            ``(row, col)``, any order.
+        snap : bool
+            Move the points onto the membrane band (:func:`osmobulge.plugins._logic.snap_points`).
+        search : float, px
+            Snapping search half-width.
+
+        Returns
+        -------
+        ProfileFit
+            The live ellipse and spline fits with volume and area.
+        """
+        frame = self.check_frame(frame)
+        p = np.asarray(points_rc, float).reshape(-1, 2)
+        if snap and len(p):
+            p = snap_points(self.frame(frame), p, search=search, up=self.up).points_rc
+        if len(p) >= 3:
+            p = p[order_along_curve(p)]
+        self.picks[frame] = p
+        self._fits.pop(frame, None)
+        fit = self.fit(frame)
+        self._emit("picks", frame)
+        return fit
+
+    def clear_picks(self, frame: int) -> None:
+        """Forget the picked points of a frame (the saved manual profile, if any, stays)."""
+        frame = self.check_frame(frame)
+        self.picks.pop(frame, None)
+        self._fits.pop(frame, None)
+        self._emit("picks", frame)
+
+    def fit(self, frame: int) -> ProfileFit:
+        """Ellipse and spline fits of the frame's picks (cached)."""
+        frame = self.check_frame(frame)
+        if frame not in self._fits:
+            pts = self.picks.get(frame, np.empty((0, 2)))
+            self._fits[frame] = fit_picked_profile(pts, pixel_size=self.pixel_size, geometry=self.geometry(frame),
+                                                   up=self.up)
+        return self._fits[frame]
+
+    def accept(self, frame: int, *, by: str | None = None) -> ProfileFit:
+        """Store the frame's picks as its manual profile (``source = "manual"``) and save.
+
+        Parameters
+        ----------
+        frame : int
+        by : str, optional
+            Who (default: the login name).
+
+        Returns
+        -------
+        ProfileFit
+            The fit whose volume and area now stand for this frame.
+
+        Raises
+        ------
+        ValueError
+            The picks give no profile (fewer than 4 points, or not across the chamber axis).
+        osmobulge.experiments.curation.CurationConflict
+            Someone else saved the curation since this session loaded it.
+        """
+        frame = self.check_frame(frame)
+        fit = self.fit(frame)
+        if not fit:
+            raise ValueError(f"frame {frame}: no profile to accept ({fit.message or 'pick more points'})")
+        pts_m = points_rc_to_m(fit.points_rc, self.pixel_size)
+        # the person replaces the profile they are looking at: an explicit decision (force);
+        # save_curation still refuses if someone else saved in between
+        new = cur_api.set_manual_profile(self.curation, frame, pts_m, by=by, force=True)
+        self._save(new)
+        self._accepted[frame] = fit
+        self._emit("accepted", frame)
+        return fit
+
+    def remove_manual(self, frame: int, *, by: str | None = None) -> None:
+        """Drop a frame's manual profile (the automatic trace counts again) and save."""
+        frame = self.check_frame(frame)
+        self._save(cur_api.remove_manual_profile(self.curation, frame, by=by))
+        self._accepted.pop(frame, None)
+        self.clear_picks(frame)
+        self._emit("accepted", frame)
+
+    def is_manual(self, frame: int) -> bool:
+        """True when the saved curation holds a manual profile for the frame."""
+        return self.check_frame(frame) in self.curation.manual_profiles
+
+    def manual_fit(self, frame: int) -> ProfileFit | None:
+        """The fit of the saved manual profile of a frame (None if it has none)."""
+        frame = self.check_frame(frame)
+        if frame not in self.curation.manual_profiles:
+            return None
+        if frame not in self._accepted:
+            pts = points_m_to_rc(self.curation.manual_profiles[frame]["points"], self.pixel_size)
+            self._accepted[frame] = fit_picked_profile(pts, pixel_size=self.pixel_size,
+                                                       geometry=self.geometry(frame), up=self.up)
+        return self._accepted[frame]
+
+    # ------------------------------------------------------------------ decisions
+    def _save(self, new) -> None:
+        self.curation = cur_api.save_curation(self.folder, new)
+
+    def exclude(self, frame: int, reason: str, note: str = "", *, by: str | None = None) -> None:
+        """Exclude a frame from the fits with a reason (one of ``curation.REASONS``) and save."""
+        frame = self.check_frame(frame)
+        self._save(cur_api.exclude_frame(self.curation, frame, reason, note, by=by, force=True))
+        self._emit("excluded", frame)
+
+    def include(self, frame: int, *, by: str | None = None) -> None:
+        """Undo a frame's exclusion and save."""
+        frame = self.check_frame(frame)
+        self._save(cur_api.include_frame(self.curation, frame, by=by))
+        self._emit("excluded", frame)
+
+    def exclusion(self, frame: int) -> dict | None:
+        """The exclusion record of a frame (reason, note, by, at), or None."""
+        return self.curation.excluded.get(self.check_frame(frame))
+
+    def set_time_origin(self, time: float, *, by: str | None = None) -> None:
+        """Set t = 0 of the flux model (s of the frame clock) and save."""
+        self._save(cur_api.set_time_origin(self.curation, float(time), by=by, force=True))
+        self._emit("time_origin", None)
+
+    def set_time_origin_frame(self, frame: int, *, by: str | None = None) -> None:
+        """Set t = 0 at a frame's time and save."""
+        self.set_time_origin(float(self.times[self.check_frame(frame)]), by=by)
+
+    def set_chamber_regions(self, regions, *, by: str | None = None) -> None:
+        """Set the chamber regions (``{"name", "rows", "cols"}``, px) and save."""
+        self._save(cur_api.set_chamber_regions(self.curation, regions, by=by, force=True))
+        self._emit("regions", None)
+
+    def chamber_regions(self) -> list[dict]:
+        """Regions in use: the curation's, else the ones of ``experiment.toml``."""
+        regions = self.curation.chamber_regions
+        if regions is None:
+            regions = self.experiment.imaging.chamber_regions
+        return [dict(r) for r in regions or ()]
+
+    # ------------------------------------------------------------------ V/V0(t)
+    def live_dataset(self):
+        """The extraction with the session's manual profiles in place of the automatic ones.
+
+        Returns
+        -------
+        xarray.Dataset
+            Over ``time`` (s, frame clock) with ``frame``, ``volume`` (m**3),
+            ``volume_ratio``, ``flag`` and ``profile_source``; for frames with a
+            saved manual profile the volume is that profile's (flag ``ok``,
+            source ``manual``), as the next ``process`` step will compute it.
+            Without an extraction, only the manual frames have volumes.
+        """
+        import xarray as xr
+
+        n = self.n_frames
+        vol = np.full(n, np.nan)
+        flag = np.array(["ok"] * n, dtype=object)
+        source = np.array(["auto"] * n, dtype=object)
+        for f in range(n):
+            sub = self._ds_frame(f)
+            if sub is None:
+                continue
+            if "volume" in sub:
+                vol[f] = float(sub["volume"].values)
+            if "flag" in sub:
+                flag[f] = str(sub["flag"].values)
+            if "profile_source" in sub:
+                source[f] = str(sub["profile_source"].values)
+        for f in self.curation.manual_profiles:
+            if f < n:
+                fit = self.manual_fit(f)
+                vol[f] = fit.volume if fit is not None else np.nan
+                flag[f], source[f] = "ok", "manual"
+        ds = xr.Dataset(
+            {
+                "volume": ("time", vol, {"units": "m3", "long_name": "bulge volume"}),
+                "volume_ratio": ("time", 1.0 + vol / self.chamber_volume, {"units": "1", "long_name": "V/V0"}),
+                "flag": ("time", flag.astype(str)),
+                "profile_source": ("time", source.astype(str)),
+            },
+            coords={"time": ("time", self.times, {"units": "s"}), "frame": ("time", np.arange(n))},
+        )
+        return ds
+
+    def volume_series(self):
+        """V/V0(t) with the curation applied (what the fits will use).
+
+        Returns
+        -------
+        xarray.Dataset
+            :meth:`live_dataset` after :func:`osmobulge.experiments.curation.apply_curation`:
+            ``time`` shifted by the time origin, ``excluded``, ``exclusion_reason``, ``kept``.
+        """
+        return cur_api.apply_curation(self.live_dataset(), self.curation)
+
+    def frame_status(self, frame: int) -> dict:
+        """What the widgets show about a frame (JSON-safe)."""
+        frame = self.check_frame(frame)
+        exc = self.exclusion(frame)
+        fit = self.fit(frame) if frame in self.picks else None
+        t0 = self.curation.time_origin or 0.0
+        live = self.live_dataset()
+        return {
+            "frame": frame,
+            "n_frames": self.n_frames,
+            "time_min": (float(self.times[frame]) - t0) / 60.0,
+            "flag": self.flag(frame),
+            "excluded": None if exc is None else exc["reason"],
+            "note": "" if exc is None else exc.get("note", ""),
+            "manual": self.is_manual(frame),
+            "n_picks": int(len(self.picks.get(frame, ()))),
+            "volume_ratio": float(live["volume_ratio"].values[frame]),
+            "pick_volume_ratio": None if not fit else 1.0 + fit.volume / self.chamber_volume,
+            "pick_message": "" if fit is None else fit.message,
+        }
+
+    # ------------------------------------------------------------------ runs
+    def reprocess(self, **extract_options):
+        """Run the ``process`` step (extraction with the saved manual profiles) and reload it.
+
+        Returns
+        -------
+        osmobulge.experiments.runs.ExperimentOutcome
+        """
+        from osmobulge.experiments.runs import run_experiment
+
+        out = run_experiment(self.folder, ["process"], options={"extract": extract_options} if extract_options
+                             else None, errors="raise")
+        self.reload_extraction()
+        self._accepted.clear()
+        self._emit("extraction")
+        return out
+
+    def trace_with_priors(self, frames=None):
+        """Semi-automatic mode: re-trace frames guided by the picked frames (not saved).
+
+        The frames with picks (saved manual profiles and unsaved picks) become
+        priors of :func:`osmobulge.imaging.extract` (``priors=``): the tracer
+        starts each frame between two picked frames from the nearest pick
+        instead of the previous frame's trace.
+
+        Parameters
+        ----------
+        frames : sequence of int, optional
+            Frames to show the new traces of (default all).
+
+        Returns
+        -------
+        xarray.Dataset
+            The new extraction; it replaces :attr:`extraction` in the session
+            (overlays and V/V0 show it).  ``DIR/results`` is not touched: accept
+            the frames you want to keep, or run ``process``.
+        """
+        from osmobulge.experiments.runs import process_experiment
+
+        priors = {int(f): points_rc_to_m(p, self.pixel_size) for f, p in self.picks.items() if len(p) >= 3}
+        if not priors:
+            raise ValueError("semi-automatic tracing needs picked points on at least one frame")
+        with tempfile.TemporaryDirectory() as tmp:
+            process_experiment(self.experiment, Path(tmp), priors=priors)
+            import xarray as xr
+
+            with xr.open_dataset(Path(tmp) / "extraction.nc", engine="h5netcdf") as ds:
+                self.extraction = ds.load()
+        self._fits.clear()
+        self._accepted.clear()
+        self._emit("extraction")
+        return self.extraction
+
+    # ------------------------------------------------------------------ import / export
+    def import_points(self, path, *, snap: bool = False, **kwargs) -> list[int]:
+        """Load picked points from CSV or ImageJ ROI files into the session (not saved).
+
+        Returns
+        -------
+        list of int
+            The frames that received points.
+        """
+        from osmobulge.plugins.roi import read_points
+
+        if Path(path).suffix.lower() == ".csv":
+            kwargs.setdefault("pixel_size_um", self.pixel_size * 1e6)
+        pts = read_points(path, **kwargs)
+        for f, p in pts.items():
+            self.set_picks(self.check_frame(f), p, snap=snap)
+        return sorted(pts)
+
+    def export_points(self, path, frames=None, **kwargs) -> Path:
+        """Write the picked points (all frames, or ``frames``) to CSV or ImageJ ROI files."""
+        from osmobulge.plugins.roi import write_points
+
+        sel = {f: p for f, p in self.picks.items() if len(p) and (frames is None or f in frames)}
+        if Path(path).suffix.lower() == ".csv":
+            kwargs.setdefault("pixel_size_um", self.pixel_size * 1e6)
+        return write_points(path, sel, **kwargs)
+
+    def close(self) -> None:
+        """Drop references (frames, extraction, listeners)."""
+        self.listeners.clear()
+        self.extraction = None
+        with contextlib.suppress(Exception):
+            del self.frames

@@ -1,0 +1,128 @@
+"""CurationSession: the Qt-free state behind the widgets, on a synthetic experiment folder."""
+
+import json
+
+import numpy as np
+import pytest
+from plugin_helpers import BAD, CHAMBER, INTERVAL_MIN, PIXEL, truth_midline_rc
+
+from osmobulge.experiments.curation import CurationConflict, load_curation
+from osmobulge.plugins._session import CurationSession
+
+V0 = np.pi * CHAMBER[0] ** 2 * CHAMBER[1]
+
+
+def clicks(truth, frame, n=12, jitter=2.0, seed=0):
+    """n clicks from rim to rim near the true midline, in random order."""
+    tr = truth_midline_rc(truth, frame)
+    idx = np.linspace(0, len(tr) - 1, n).astype(int)
+    rng = np.random.default_rng(seed)
+    pts = tr[idx] + rng.uniform(-jitter, jitter, size=(n, 2))
+    return pts[rng.permutation(n)]
+
+
+def test_session_opens_the_folder(experiment):
+    folder, truth = experiment
+    s = CurationSession(folder)
+    assert s.n_frames == truth.sizes["time"]
+    assert s.shape == tuple(truth.attrs.get("shape", s.shape))
+    assert s.pixel_size == pytest.approx(PIXEL)
+    np.testing.assert_allclose(s.times, np.arange(s.n_frames) * INTERVAL_MIN * 60)
+    assert s.chamber_volume == pytest.approx(V0)
+    np.testing.assert_array_equal(s.frame(2), np.asarray(s.frames[2]))
+    assert s.curation.revision == 0 and not s.picks
+    with pytest.raises(ValueError, match=r"frame = 99: expected an integer in \[0, 5\]"):
+        s.frame(99)
+
+
+def test_pick_accept_saves_manual_profile_with_its_volume(experiment):
+    folder, truth = experiment
+    s = CurationSession(folder)
+    fit = s.set_picks(BAD, clicks(truth, BAD))
+    assert fit, fit.message
+    true_v = float(truth["volume"].values[BAD])
+    # rim placed from the picked ends: within 2 % or a 0.5 px layer over the well
+    tol = max(0.02 * true_v, np.pi * CHAMBER[0] ** 2 * 0.5 * PIXEL)
+    assert abs(fit.volume - true_v) < tol
+    assert fit.area == pytest.approx(float(truth["area_ratio"].values[BAD]) * np.pi * CHAMBER[0] ** 2, rel=0.03)
+    s.accept(BAD, by="tester")
+    on_disk = load_curation(folder)
+    prof = on_disk.manual_profiles[BAD]
+    assert prof["source"] == "manual" and prof["units"] == "m" and prof["by"] == "tester"
+    np.testing.assert_allclose(np.asarray(prof["points"]), fit.points_rc[:, ::-1] * PIXEL)
+    # the file is valid JSON written in one piece, with the history
+    assert json.loads((folder / "curation.json").read_text())["revision"] == 1
+    # V/V0 of that frame now comes from the manual profile
+    vs = s.volume_series()
+    assert vs["volume_ratio"].values[BAD] == pytest.approx(1 + fit.volume / V0)
+    assert str(vs["profile_source"].values[BAD]) == "manual" and bool(vs["kept"].values[BAD])
+
+
+def test_reopen_finds_the_manual_profile(experiment):
+    folder, truth = experiment
+    s = CurationSession(folder)
+    s.set_picks(BAD, clicks(truth, BAD))
+    fit = s.accept(BAD)
+    s.close()
+    s2 = CurationSession(folder)
+    assert s2.is_manual(BAD)
+    np.testing.assert_allclose(s2.picks[BAD], fit.points_rc, atol=1e-9)
+    assert s2.manual_fit(BAD).volume == pytest.approx(fit.volume, rel=1e-9)
+
+
+def test_exclude_include_time_origin_regions(experiment):
+    folder, _ = experiment
+    s = CurationSession(folder)
+    seen = []
+    s.listeners.append(lambda what, frame: seen.append((what, frame)))
+    s.exclude(1, "out_of_focus", "blurred")
+    vs = s.volume_series()
+    assert bool(vs["excluded"].values[1]) and not bool(vs["kept"].values[1])
+    assert str(vs["exclusion_reason"].values[1]) == "out_of_focus"
+    assert load_curation(folder).excluded[1]["note"] == "blurred"
+    s.exclude(1, "other")  # changing the reason in the GUI is an explicit decision
+    assert load_curation(folder).excluded[1]["reason"] == "other"
+    s.include(1)
+    assert 1 not in load_curation(folder).excluded
+    s.set_time_origin_frame(2)
+    vs = s.volume_series()
+    np.testing.assert_allclose(vs["time"].values, (np.arange(s.n_frames) - 2) * INTERVAL_MIN * 60)
+    assert not vs["kept"].values[:2].any()
+    regions = [{"name": "left", "rows": [0, 200], "cols": [0, 120]}]
+    s.set_chamber_regions(regions)
+    assert s.chamber_regions() == regions == [dict(r) for r in load_curation(folder).chamber_regions]
+    assert [w for w, _ in seen] == ["excluded", "excluded", "excluded", "time_origin", "regions"]
+    with pytest.raises(ValueError, match="reason"):
+        s.exclude(0, "bored")
+
+
+def test_concurrent_save_is_refused(experiment):
+    folder, _ = experiment
+    a, b = CurationSession(folder), CurationSession(folder)
+    a.exclude(0, "other")
+    with pytest.raises(CurationConflict, match="revision"):
+        b.exclude(4, "other")
+    assert 4 not in load_curation(folder).excluded
+
+
+def test_accept_without_a_profile_raises(experiment):
+    folder, _ = experiment
+    s = CurationSession(folder)
+    s.set_picks(2, [[100.0, 100.0], [101.0, 120.0]], snap=False)
+    with pytest.raises(ValueError, match="no profile to accept"):
+        s.accept(2)
+    assert not (folder / "curation.json").exists()
+
+
+def test_points_export_import_round_trip(experiment, tmp_path):
+    folder, truth = experiment
+    s = CurationSession(folder)
+    s.set_picks(2, clicks(truth, 2, seed=1))
+    s.set_picks(4, clicks(truth, 4, seed=2))
+    for name in ("p.csv", "p.zip"):
+        path = s.export_points(tmp_path / name)
+        s2 = CurationSession(folder)
+        assert s2.import_points(path) == [2, 4]
+        for f in (2, 4):
+            np.testing.assert_allclose(s2.picks[f], s.picks[f], atol=1e-4)
+            assert s2.fit(f).volume == pytest.approx(s.fit(f).volume, rel=1e-5)

@@ -1,0 +1,142 @@
+"""The napari plugin end to end: manifest, reader, widgets, shortcuts, screenshot (Xvfb via pytest-xvfb)."""
+
+import numpy as np
+import pytest
+from plugin_helpers import BAD, CHAMBER, PIXEL, truth_midline_rc
+
+from osmobulge.experiments.curation import load_curation
+
+napari = pytest.importorskip("napari")
+pytestmark = pytest.mark.gui
+
+V0 = np.pi * CHAMBER[0] ** 2 * CHAMBER[1]
+
+
+def test_manifest_is_valid_and_discovered():
+    from npe2 import PluginManager
+    from npe2.manifest import PluginManifest
+
+    pm = PluginManager.instance()
+    pm.discover()
+    mf = pm.get_manifest("osmobulge")
+    PluginManifest.model_validate(mf.model_dump())  # what `npe2 validate osmobulge` checks
+    assert [w.display_name for w in mf.contributions.widgets] == ["Curation", "Profile picker"]
+    assert mf.contributions.readers[0].accepts_directories
+
+
+def test_reader_rejects_other_paths(tmp_path):
+    from osmobulge.plugins._reader import napari_get_reader
+
+    assert napari_get_reader(str(tmp_path)) is None
+    assert napari_get_reader([str(tmp_path), str(tmp_path)]) is None
+    (tmp_path / "a.tif").write_bytes(b"")
+    assert napari_get_reader(str(tmp_path / "a.tif")) is None
+
+
+def _open(viewer, folder):
+    layers = viewer.open(str(folder), plugin="osmobulge")
+    return layers[0]
+
+
+def _clicks(truth, frame, n=12, seed=0):
+    tr = truth_midline_rc(truth, frame)
+    idx = np.linspace(0, len(tr) - 1, n).astype(int)
+    rng = np.random.default_rng(seed)
+    return tr[idx] + rng.uniform(-2, 2, size=(n, 2))
+
+
+def test_reader_opens_the_experiment(make_napari_viewer, experiment):
+    folder, truth = experiment
+    viewer = make_napari_viewer()
+    image = _open(viewer, folder)
+    assert image.data.shape == (truth.sizes["time"], 200, 240)
+    np.testing.assert_allclose(image.scale, [1.0, PIXEL * 1e6, PIXEL * 1e6])
+    assert tuple(viewer.dims.axis_labels) == ("frame", "y", "x")
+    assert image.metadata["osmobulge"]["folder"] == str(folder)
+    assert "auto profiles" not in viewer.layers  # not processed yet
+
+
+def test_widgets_pick_accept_exclude(make_napari_viewer, experiment, qtbot):
+    from osmobulge.plugins._widget import CurationWidget, ProfilePicker
+
+    folder, truth = experiment
+    viewer = make_napari_viewer()
+    _open(viewer, folder)
+    cw = CurationWidget(viewer)
+    pp = ProfilePicker(viewer)
+    viewer.window.add_dock_widget(cw, name="Curation")
+    viewer.window.add_dock_widget(pp, name="Profile picker")
+    # go to the bad frame with the widget's buttons
+    viewer.dims.set_current_step(0, 0)
+    for _ in range(BAD):
+        cw._next.clicked.emit()
+    assert viewer.dims.current_step[0] == BAD
+    assert cw._status.value.startswith(f"frame {BAD + 1}/6")
+    # click points on the membrane: they land in the points layer and snap
+    clicks = _clicks(truth, BAD)
+    pts = pp.points_layer
+    for p in clicks:
+        pts.add([BAD, *p])
+    picks = pp.session.picks[BAD]
+    assert len(picks) == len(clicks)
+    layer_rows = np.asarray(pts.data)
+    np.testing.assert_allclose(layer_rows[:, 1:], picks)  # the layer shows the snapped points
+    assert np.linalg.norm(picks - clicks[np.argsort(clicks[:, 1])], axis=1).max() > 0  # they moved
+    # live fits drawn on this frame: spline (pending colour) and ellipse
+    assert len(pp.fit_layer.data) == 2 and all(np.all(s[:, 0] == BAD) for s in pp.fit_layer.data)
+    assert "V/V0" in pp._info.value
+    # accept: saved as a manual profile with the recomputed volume
+    fit = pp.accept()
+    cur = load_curation(folder)
+    assert cur.manual_profiles[BAD]["source"] == "manual"
+    true_v = float(truth["volume"].values[BAD])
+    assert abs(fit.volume - true_v) < max(0.02 * true_v, np.pi * CHAMBER[0] ** 2 * 0.5 * PIXEL)
+    d = cw.plot_data()
+    assert d["manual"][BAD] and d["volume_ratio"][BAD] == pytest.approx(1 + fit.volume / V0)
+    assert "saved" in pp._info.value
+    # exclude the next frame with a reason, from the widget
+    cw._next.clicked.emit()
+    cw._reason.value = "touching"
+    cw._note.value = "neighbour"
+    cw._exclude.clicked.emit()
+    assert load_curation(folder).excluded[BAD + 1]["reason"] == "touching"
+    assert cw.plot_data()["excluded"][BAD + 1]
+    assert "EXCLUDED (touching)" in cw._status.value
+    # time origin at the current frame
+    cw._t0_here.clicked.emit()
+    assert load_curation(folder).time_origin == pytest.approx(cw.session.times[BAD + 1])
+    assert cw.plot_data()["time_min"][BAD + 1] == pytest.approx(0.0)
+
+
+def test_keyboard_shortcuts(make_napari_viewer, experiment):
+    from osmobulge.plugins._widget import CurationWidget, ProfilePicker
+
+    folder, truth = experiment
+    viewer = make_napari_viewer()
+    _open(viewer, folder)
+    cw, pp = CurationWidget(viewer), ProfilePicker(viewer)
+    viewer.dims.set_current_step(0, 0)
+    handler = viewer.window._qt_viewer._key_map_handler  # dispatches as the canvas does: layer keymap first
+
+    def press(key):
+        handler.press_key(key)
+        handler.release_key(key)
+
+    assert viewer.layers.selection.active is pp.points_layer  # picking mode: the points layer is active
+    press("n")
+    press("n")
+    assert viewer.dims.current_step[0] == 2
+    press("b")
+    assert viewer.dims.current_step[0] == 1
+    press("Shift-Right")
+    assert viewer.dims.current_step[0] == 2
+    press("Shift-Left")
+    assert viewer.dims.current_step[0] == 1
+    pp.set_points(_clicks(truth, 1))
+    press("Enter")
+    assert 1 in load_curation(folder).manual_profiles
+    cw._reason.value = "out_of_focus"
+    press("Shift-X")
+    assert load_curation(folder).excluded[1]["reason"] == "out_of_focus"
+    press("Shift-U")
+    assert 1 not in load_curation(folder).excluded
