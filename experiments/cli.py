@@ -49,4 +49,8 @@ def main() -> None:  # entry point of the console script
 
 
 if __name__ == "__main__":
-    main()
+    # run the canonical module's app: topic modules register on osmobulge.experiments.cli.app,
+    # not on this __main__ copy
+    from osmobulge.experiments.cli import main as _main
+
+    _main()

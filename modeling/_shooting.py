@@ -296,7 +296,7 @@ def solve_volumes(
     lam0_max,
     steps=DEFAULT_STEPS,
     rtol=1e-11,
-    maxiter=40,
+    maxiter=80,
 ):
     r"""Find the pole stretch for each target volume; return the scaled results.
 
@@ -329,11 +329,14 @@ def solve_volumes(
         shot = shoot(material, lam0, et, p, steps=steps, rho_max=3.0)
         res = scaled_results(lam0, p, shot)
         ok = np.isfinite(res["vtilde"]) & (res["vtilde"] > 0)
-        if np.any(~ok):
-            # retry broken rows once with a generous radius (poor pressure guess)
+        # Rows without a crossing had a poor trial pressure (the crossing lies beyond rho_max):
+        # retry with the small-deflection series pressure, then with a generous radius.
+        for p_retry, rmax in ((pressure_guess(material, lam0, et), 3.0), (p, 8.0)):
+            if ok.all():
+                break
             redo = np.nonzero(~ok)[0]
-            shot2 = shoot(material, lam0[redo], et[redo], p[redo], steps=steps, rho_max=8.0)
-            res2 = scaled_results(lam0[redo], p[redo], shot2)
+            shot2 = shoot(material, lam0[redo], et[redo], p_retry[redo], steps=steps, rho_max=rmax)
+            res2 = scaled_results(lam0[redo], p_retry[redo], shot2)
             for k in res:
                 res[k][redo] = res2[k]
             ok = np.isfinite(res["vtilde"]) & (res["vtilde"] > 0)

@@ -155,8 +155,9 @@ _FAMILY_U = np.unique(np.r_[np.geomspace(1e-9, 0.5, 28), 1.0 - np.geomspace(0.5,
 
 
 def _row_curves(material, ell, lam_top):
-    """Coarse exact families at up to three rim stretches, interpolated to every row."""
-    levels = np.unique(np.round(np.r_[ell.min(), np.median(ell), ell.max()], 12))
+    """Coarse exact families at up to nine rim stretches, interpolated to every row."""
+    # a varying pre-stretch changes the small-deflection scaling: sample it at up to 9 quantiles
+    levels = np.unique(np.round(np.quantile(ell, np.linspace(0.0, 1.0, 9)), 12))
     top = float(np.min(lam_top))
     lam0 = np.concatenate([lv + _FAMILY_U * (top - lv) for lv in levels])
     ells = np.repeat(levels, _FAMILY_U.size)

@@ -15,11 +15,13 @@ The cache is the only file I/O in :mod:`osmobulge.modeling`; writes are atomic.
 from __future__ import annotations
 
 import contextlib
+import functools
 import hashlib
 import json
 import math
 import os
 import tempfile
+import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -32,7 +34,7 @@ from scipy.interpolate import CubicSpline
 __all__ = ["MechanicsTable", "mechanics_table", "cache_dir", "TABLE_SCHEMA"]
 
 #: bump when the solver or the table layout changes, to invalidate old caches
-TABLE_SCHEMA = 1
+TABLE_SCHEMA = 2
 _QUANTITIES = ("area_ratio", "inverse_thickness", "pressure", "lambda_bar", "pole_thickness_ratio", "lambda_pre")
 
 
@@ -44,6 +46,16 @@ def cache_dir() -> Path:
     import platformdirs
 
     return Path(platformdirs.user_cache_dir("osmobulge"))
+
+
+@functools.lru_cache(maxsize=1)
+def _solver_code_hash() -> str:
+    """Hash of the solver sources, so a changed solver never reuses stale cached tables."""
+    here = Path(__file__).resolve().parent
+    h = hashlib.sha256()
+    for name in ("materials.py", "_shooting.py", "bulge.py", "linear.py", "prestretch.py", "table.py"):
+        h.update((here / name).read_bytes())
+    return h.hexdigest()[:16]
 
 
 def _prestretch_key(lambda_pre, vtilde_end: float) -> str:
@@ -82,11 +94,17 @@ class MechanicsTable:
         self.lambda_pre_key = lambda_pre_key
         self.vtilde_lock = float(vtilde_lock)
         self.vtilde_max = float(self.vtilde[-1])
-        self._splines = {k: CubicSpline(self.vtilde, v) for k, v in self.data.items() if k != "pressure"}
-        # P ~ V^3 at small deflection (Foppl-Hencky): interpolate P / V^3, which is smooth
+        # quantities that are not defined for a law (NaN, e.g. the pole of the linear membrane) get no spline
+        self._splines = {
+            k: CubicSpline(self.vtilde, v) for k, v in self.data.items() if k != "pressure" and np.all(np.isfinite(v))
+        }
+        # The pressure rises like V^3 for a slack rim (Foppl-Hencky) but like V for a pre-stretched one,
+        # and diverges at Gent locking: a cubic spline of ln P against ln V is smooth in every regime.
         pos = self.vtilde > 0
-        self._p_first = self.vtilde[pos][0]
-        self._p_spline = CubicSpline(self.vtilde[pos], self.data["pressure"][pos] / self.vtilde[pos] ** 3)
+        lv, lp = np.log(self.vtilde[pos]), np.log(self.data["pressure"][pos])
+        self._lnv_first = lv[0]
+        self._lnp_spline = CubicSpline(lv, lp)
+        self._lnp_slope0 = float((lp[1] - lp[0]) / (lv[1] - lv[0]))  # local power law at the smallest nodes
 
     def _eval(self, name, vtilde):
         v = np.asarray(vtilde, float)
@@ -98,9 +116,20 @@ class MechanicsTable:
                    if math.isfinite(self.vtilde_lock) else "")
             )
         if name == "pressure":
-            out = self._p_spline(np.maximum(v, self._p_first)) * v**3
-        else:
+            with np.errstate(divide="ignore"):
+                lv = np.log(v)
+            below = lv < self._lnv_first
+            # below the smallest node: the power law of the two smallest nodes (small-deflection limit)
+            lnp = np.where(
+                below,
+                self._lnp_spline(self._lnv_first) + self._lnp_slope0 * (lv - self._lnv_first),
+                self._lnp_spline(np.maximum(lv, self._lnv_first)),
+            )
+            out = np.where(v > 0, np.exp(lnp), 0.0)
+        elif name in self._splines:
             out = self._splines[name](v)
+        else:
+            raise ValueError(f"{name} is not defined for the {self.material.law} law")
         return float(out) if out.ndim == 0 else out
 
     def area_ratio(self, vtilde):
@@ -127,7 +156,8 @@ class MechanicsTable:
         """The solved nodes as an ``xarray.Dataset`` over ``vtilde``."""
         return xr.Dataset(
             {k: ("vtilde", v, dict(MECHANICS_ATTRS[k])) for k, v in self.data.items()},
-            coords={"vtilde": ("vtilde", self.vtilde, {"units": "1"})},
+            coords={"vtilde": ("vtilde", self.vtilde,
+                               {"units": "1", "long_name": "dimensionless bulge volume dV/(pi a^3)"})},
             attrs={"material_law": self.material.law, "lambda_pre": self.lambda_pre_key},
         )
 
@@ -137,9 +167,16 @@ class MechanicsTable:
 
 
 def _grid(vtilde_end: float, n: int) -> np.ndarray:
-    """Chebyshev-Lobatto nodes on [0, vtilde_end]."""
+    """Chebyshev-Lobatto nodes on [0, vtilde_end], plus 20 log-spaced nodes from 1e-5 to 2 % of it.
+
+    The log-spaced nodes resolve the small-deflection power laws of the pressure (P ~ V^3
+    for a slack rim, ~ V or V^2 with pre-stretch, and the crossover between them) for the
+    log-log spline.
+    """
     k = np.arange(n)
-    return vtilde_end * 0.5 * (1.0 - np.cos(np.pi * k / (n - 1)))
+    cheb = vtilde_end * 0.5 * (1.0 - np.cos(np.pi * k / (n - 1)))
+    low = np.geomspace(min(1e-5, cheb[1] / 10.0), 0.02 * vtilde_end, 20)
+    return np.unique(np.r_[cheb, low])
 
 
 def mechanics_table(material, lambda_pre=1.0, *, vtilde_max=None, n=160, cache=True) -> MechanicsTable:
@@ -154,7 +191,7 @@ def mechanics_table(material, lambda_pre=1.0, *, vtilde_max=None, n=160, cache=T
     vtilde_max : float, optional
         Upper end; default 99 % of the locking volume (Gent laws) or 12.
     n : int
-        Number of solved nodes (>= 8).
+        Number of Chebyshev nodes (>= 8); 20 log-spaced nodes at small volumes are added.
     cache : bool
         Use the on-disk cache.
 
@@ -186,6 +223,7 @@ def mechanics_table(material, lambda_pre=1.0, *, vtilde_max=None, n=160, cache=T
         "n": n,
         "version": __version__,
         "schema": TABLE_SCHEMA,
+        "code": _solver_code_hash(),
     }
     key = hashlib.sha256(json.dumps(key_fields, sort_keys=True).encode()).hexdigest()[:32]
     path = cache_dir() / f"mechanics-{key}.npz"
@@ -196,8 +234,8 @@ def mechanics_table(material, lambda_pre=1.0, *, vtilde_max=None, n=160, cache=T
                 grid = f["vtilde"]
                 vlock = float(f["vtilde_lock"])
                 data = {q: f[q] for q in _QUANTITIES}
-        except (OSError, KeyError, ValueError):
-            data = None  # corrupt cache entry: recompute and overwrite
+        except (OSError, KeyError, ValueError, EOFError, zipfile.BadZipFile):
+            data = None  # corrupt or truncated cache entry: recompute and overwrite
     if data is None:
         if isinstance(material, LinearElastic):
             vlock = math.inf

@@ -4,7 +4,7 @@ The spline error is measured against direct ``bulge_mechanics`` solves at the mi
 between the table's nodes, where an interpolant is least accurate.  Measured with n = 160
 (this machine, 2026-11): PDMS f_A 1.1e-7, f_l 2.4e-7, lambda_bar 8.3e-8, pressure 5.8e-6;
 PEO_PDMS 4.2e-7, 9.5e-7, 3.2e-7, 2.4e-5; PDMS with PreStretch(0.01, 0.001) 7.4e-8, 1.5e-7,
-5.7e-8 (pressure: see the xfail below).  The bounds sit a few times above.
+5.7e-8.  The bounds sit a few times above.
 
 Every midpoint is checked, down to the first one (~3e-4); the table's end below the first
 node is checked against the analytic small-deflection limits.
@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import math
 import os
-import zipfile
 
 import numpy as np
 import pytest
@@ -89,7 +88,15 @@ def midpoint_errors():
             errs = {}
             for q in (*SHAPE_QUANTITIES, "pressure"):
                 rel = np.abs(getattr(tab, q)(mid) / direct[q].values - 1.0)
-                errs[q] = (float(rel.max()), float(mid[rel.argmax()]))
+                if q == "pressure":
+                    # below the smallest positive node the table extrapolates the local power law
+                    # (P ~ V^3 slack, ~ V^2 or V pre-stretched); it is checked on its own bound
+                    below = mid < g[g > 0][0]
+                    errs["pressure_extrapolated"] = (float(rel[below].max()), float(mid[below][rel[below].argmax()]))
+                    rel, mid_q = rel[~below], mid[~below]
+                else:
+                    mid_q = mid
+                errs[q] = (float(rel.max()), float(mid_q[rel.argmax()]))
             cache[case] = errs
         return cache[case]
 
@@ -117,17 +124,23 @@ def test_spline_error_of_pressure_is_bounded(case, midpoint_errors):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(
-    strict=True,
-    reason="table.py interpolates P/V^3 (Foppl-Hencky, P ~ V^3), but a pre-stretched rim (lambda_pre > 1) gives "
-    "a tension-dominated membrane with P ~ V at small Vtilde: P/V^3 ~ V^-2 and its spline is off by "
-    "~7x (const 1.05) / ~50 % (PreStretch) for Vtilde below 0.05",
-)
 @pytest.mark.parametrize("case", ["PDMS-PreStretch", "PDMS-const-1.05"])
 def test_spline_error_of_pressure_with_prestretch_is_bounded(case, midpoint_errors):
     err, where = midpoint_errors(case)["pressure"]
     bound = BOUNDS[case][1]
     assert err < bound, f"{case} pressure: max rel error {err:.2e} at Vtilde={where:.4g} exceeds {bound:.0e}"
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("case", list(CASES))
+def test_pressure_below_the_smallest_node_follows_a_power_law(case, midpoint_errors):
+    """Below Vtilde ~ 1e-5 the power law of the two smallest nodes is extrapolated.
+
+    With a pre-stretch that grows with Vtilde (PreStretch) the local exponent still drifts
+    there by O(Vtilde / c1) ~ 1e-3; P_t/Pi0 is ~1e-9 at such volumes, so this is harmless.
+    """
+    err, where = midpoint_errors(case)["pressure_extrapolated"]
+    assert err < 2e-3, f"{case}: extrapolated pressure off by {err:.2e} at Vtilde={where:.3g}"
 
 
 def test_small_vtilde_end_follows_the_small_deflection_limits():
@@ -138,7 +151,7 @@ def test_small_vtilde_end_follows_the_small_deflection_limits():
     # deeper down f_A - 1 ~ 4e-10 is below the spline's absolute accuracy, f_A itself is not
     assert abs(tab.area_ratio(1e-5) - 1.0) < 1e-9
     p_over_v3 = float(bulge_mechanics(PDMS, [0.01]).pressure[0]) / 0.01**3
-    v = np.array([1e-5, 1e-4, 1e-3, 5e-3])  # the pressure is interpolated as P/V^3: exact scaling
+    v = np.array([1e-6, 1e-5, 1e-4, 1e-3, 5e-3])  # log-log spline, power law below the smallest node
     np.testing.assert_allclose(tab.pressure(v) / v**3, p_over_v3, rtol=5e-3)
     assert tab.area_ratio(0.0) == 1.0 and tab.pressure(0.0) == 0.0 and tab.inverse_thickness(0.0) == 1.0
 
@@ -175,13 +188,6 @@ def test_default_range_is_just_below_locking(cache_tmp):
     assert tab.vtilde_max == pytest.approx(0.99 * tab.vtilde_lock, rel=1e-12)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    raises=ValueError,
-    reason="table.py: bulge_mechanics(LinearElastic) returns NaN pole_thickness_ratio/pole_stretch and "
-    "MechanicsTable splines every stored quantity, so CubicSpline raises '`y` must contain only finite "
-    "values'; the docstring promises 'material : Material or LinearElastic'",
-)
 def test_linear_elastic_table():
     lin = mechanics_table(LinearElastic(1e6), n=16, cache=False)
     assert math.isinf(lin.vtilde_lock) and lin.vtilde_max == 12.0
@@ -194,79 +200,98 @@ def _n_files(d):
     return len(list(d.glob("mechanics-*.npz"))) if d.exists() else 0
 
 
-def test_cache_key_changes_with_every_input(cache_tmp):
+@pytest.fixture
+def fast_solver(monkeypatch):
+    """Replace the bulge solve inside mechanics_table by the linear-elastic closed forms.
+
+    The cache logic (keys, files, corrupt entries, locations) does not depend on the numbers,
+    and each real solve costs ~0.5 s; the real solver is exercised by the round-trip,
+    default-range and spline-error tests.  Returns the list of (material, lambda_pre, grid)
+    of every solve.
+    """
+    calls = []
+
+    def solve(material, vtilde, lambda_pre=1.0):
+        calls.append((material, lambda_pre, np.asarray(vtilde)))
+        return bulge_mechanics(LinearElastic(1e6), vtilde, lambda_pre=lambda_pre)
+
+    monkeypatch.setattr(table_mod, "bulge_mechanics", solve)
+    monkeypatch.setattr(table_mod, "locking_volume", lambda material, lambda_pre=1.0: 7.0)
+    return calls
+
+
+def test_cache_key_changes_with_every_input(cache_tmp, fast_solver):
     base = {"material": PDMS, "lambda_pre": 1.0, "vtilde_max": 1.0, "n": 8}
     mechanics_table(**base)
-    assert _n_files(cache_tmp) == 1
-    mechanics_table(**base)  # same inputs: same key
-    assert _n_files(cache_tmp) == 1
+    assert _n_files(cache_tmp) == 1 and len(fast_solver) == 1
+    mechanics_table(**base)  # same inputs: same key, no solve
+    assert _n_files(cache_tmp) == 1 and len(fast_solver) == 1
     variants = [
         {"material": GentGent(c1=0.02e6, c2=0.0297e6, jm=26.0)},  # constants
         {"material": GentGent(c1=0.0316e6, c2=0.0297e6, jm=26.0)},  # same constants, other E (0.249 MPa)
+        {"material": GentGent(c1=0.0316e6, c2=0.0297e6, jm=27.0, reference_modulus=0.37e6)},  # Jm
         {"lambda_pre": 1.02},  # constant pre-stretch
         {"lambda_pre": PreStretch(0.01, 0.0)},  # callable pre-stretch (cache_key)
         {"lambda_pre": PreStretch(0.02, 0.0)},
         {"n": 9},  # grid
         {"vtilde_max": 0.9},  # range
     ]
-    tables = [mechanics_table(**base)]
     for i, change in enumerate(variants, start=2):
-        tables.append(mechanics_table(**(base | change)))
+        tab = mechanics_table(**(base | change))
         assert _n_files(cache_tmp) == i, change
-    # and the entries hold what was asked for: the softer law thins more at the same volume
-    assert tables[1].inverse_thickness(1.0) > tables[0].inverse_thickness(1.0)
-    np.testing.assert_array_equal(tables[2].data["area_ratio"], tables[0].data["area_ratio"])  # E only scales f_p
-    assert tables[3].area_ratio(0.0) == pytest.approx(1.02**2)
+        assert len(fast_solver) == i, change  # a miss solves once, with the new inputs
+        material, lambda_pre, grid = fast_solver[-1]
+        assert material is (base | change)["material"] and lambda_pre is (base | change)["lambda_pre"]
+        assert grid.max() == pytest.approx((base | change)["vtilde_max"])
+        assert tab.area_ratio(0.0) == pytest.approx(float(np.asarray((base | change)["lambda_pre"](0.0)
+                                                                      if callable(lambda_pre) else lambda_pre)) ** 2)
+    # every variant is a hit the second time round
+    for change in variants:
+        mechanics_table(**(base | change))
+    assert len(fast_solver) == len(variants) + 1
 
 
-def test_cache_key_of_plain_callables_is_their_values(cache_tmp):
+def test_cache_key_of_plain_callables_is_their_values(cache_tmp, fast_solver):
     base = {"vtilde_max": 1.0, "n": 8}
-    lin = PDMS
-    t1 = mechanics_table(lin, lambda v: 1.0 + 0.01 * np.asarray(v), **base)
-    t2 = mechanics_table(lin, lambda v: 1.0 + 0.01 * np.asarray(v), **base)  # another object, same values
-    assert _n_files(cache_tmp) == 1
+    t1 = mechanics_table(PDMS, lambda v: 1.0 + 0.01 * np.asarray(v), **base)
+    t2 = mechanics_table(PDMS, lambda v: 1.0 + 0.01 * np.asarray(v), **base)  # another object, same values
+    assert _n_files(cache_tmp) == 1 and len(fast_solver) == 1
     np.testing.assert_array_equal(t1.data["area_ratio"], t2.data["area_ratio"])
-    mechanics_table(lin, lambda v: 1.0 + 0.02 * np.asarray(v), **base)
-    assert _n_files(cache_tmp) == 2
+    mechanics_table(PDMS, lambda v: 1.0 + 0.02 * np.asarray(v), **base)
+    assert _n_files(cache_tmp) == 2 and len(fast_solver) == 2
 
 
 @pytest.mark.parametrize(
     "corrupt",
     [
         lambda p: p.write_bytes(b"this is not an npz file"),
-        pytest.param(
-            lambda p: p.write_bytes(p.read_bytes()[: p.stat().st_size // 2]),
-            marks=pytest.mark.xfail(
-                strict=True,
-                raises=zipfile.BadZipFile,
-                reason="table.py mechanics_table catches (OSError, KeyError, ValueError) around np.load, but a "
-                "truncated .npz (e.g. a killed writer on a non-atomic file system, a full disk) raises "
-                "zipfile.BadZipFile, which escapes instead of triggering the recompute",
-            ),
-        ),
+        lambda p: p.write_bytes(p.read_bytes()[: p.stat().st_size // 2]),  # truncated (killed writer, full disk)
+        lambda p: p.write_bytes(b""),  # empty
         lambda p: np.savez(p.open("wb"), vtilde=np.arange(3.0)),  # valid npz, keys missing
     ],
-    ids=["garbage", "truncated", "missing-keys"],
+    ids=["garbage", "truncated", "empty", "missing-keys"],
 )
-def test_corrupt_cache_file_is_recomputed(cache_tmp, shoot_counter, corrupt):
+def test_corrupt_cache_file_is_recomputed(cache_tmp, fast_solver, corrupt):
     good = mechanics_table(PDMS, vtilde_max=2.0, n=12)
     (path,) = cache_tmp.glob("mechanics-*.npz")
     corrupt(path)
-    shoot_counter.clear()
     again = mechanics_table(PDMS, vtilde_max=2.0, n=12)
-    assert len(shoot_counter) > 0  # it solved again
+    assert len(fast_solver) == 2  # it solved again
     for q, values in good.data.items():
-        np.testing.assert_allclose(again.data[q], values, rtol=1e-14, err_msg=q)
+        np.testing.assert_array_equal(again.data[q], values, err_msg=q)
     with np.load(path) as f:  # and the entry was rewritten
         np.testing.assert_array_equal(f["vtilde"], good.vtilde)
+    mechanics_table(PDMS, vtilde_max=2.0, n=12)
+    assert len(fast_solver) == 2  # and is used from then on
 
 
-def test_osmobulge_cache_dir_is_honoured(tmp_path, monkeypatch):
+def test_osmobulge_cache_dir_is_honoured(tmp_path, monkeypatch, fast_solver):
     target = tmp_path / "nested" / "cache"
     monkeypatch.setenv("OSMOBULGE_CACHE_DIR", str(target))
     assert cache_dir() == target
     mechanics_table(PDMS, vtilde_max=1.0, n=8)
     assert _n_files(target) == 1
+    assert [p.name for p in tmp_path.iterdir()] == ["nested"]
 
 
 def test_cache_dir_defaults_to_the_user_cache(monkeypatch):
@@ -276,18 +301,20 @@ def test_cache_dir_defaults_to_the_user_cache(monkeypatch):
     assert cache_dir() == type(cache_dir())(platformdirs.user_cache_dir("osmobulge"))
 
 
-def test_cache_false_writes_nothing(cache_tmp):
+def test_cache_false_writes_nothing(cache_tmp, fast_solver):
     mechanics_table(PDMS, vtilde_max=1.0, n=10, cache=False)
     mechanics_table(PEO_PDMS, PreStretch(0.01, 0.0), vtilde_max=1.0, n=8, cache=False)
+    mechanics_table(PDMS, vtilde_max=1.0, n=10, cache=False)  # and reads nothing either
+    assert len(fast_solver) == 3
     assert not cache_tmp.exists() or list(cache_tmp.iterdir()) == []
 
 
-def test_unwritable_cache_does_not_break_the_computation(tmp_path, monkeypatch):
+def test_unwritable_cache_does_not_break_the_computation(tmp_path, monkeypatch, fast_solver):
     blocker = tmp_path / "a-file"
     blocker.write_text("not a directory")
     monkeypatch.setenv("OSMOBULGE_CACHE_DIR", str(blocker / "cache"))
     tab = mechanics_table(PDMS, vtilde_max=1.0, n=8)
-    assert tab.area_ratio(0.5) == pytest.approx(float(bulge_mechanics(PDMS, [0.5]).area_ratio[0]), rel=1e-4)
+    assert tab.area_ratio(0.5) == pytest.approx(2.0, rel=1e-6)  # the stand-in's 1 + 4 V^2
     assert sorted(os.listdir(tmp_path)) == ["a-file"]
 
 
@@ -343,7 +370,5 @@ def test_to_dataset_variables_are_annotated(small_table):
     np.testing.assert_array_equal(ds["area_ratio"].values, small_table.data["area_ratio"])
 
 
-@pytest.mark.xfail(strict=True, reason="table.py MechanicsTable.to_dataset: the vtilde coordinate has units but no "
-                   "long_name (issue 2: every Dataset variable carries units and long_name)")
 def test_to_dataset_coordinate_is_annotated(small_table):
     assert small_table.to_dataset()["vtilde"].attrs.get("long_name")
