@@ -10,6 +10,7 @@ import importlib
 import importlib.util
 
 import typer
+
 from osmobulge import __version__
 
 app = typer.Typer(

@@ -39,8 +39,8 @@ from osmobulge.modeling.transport import (
     paper_chamber,
     permeability_from_mobility,
     time_constant,
-    vtilde_from_volume_ratio,
     volume_ratio_from_vtilde,
+    vtilde_from_volume_ratio,
 )
 
 __all__ = [

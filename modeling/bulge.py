@@ -20,12 +20,13 @@ import math
 
 import numpy as np
 import xarray as xr
+from scipy.interpolate import CubicHermiteSpline
+
 from osmobulge import __version__
 from osmobulge.modeling import _shooting
 from osmobulge.modeling.linear import linear_area_ratio, linear_pressure
 from osmobulge.modeling.materials import LinearElastic, Material
 from osmobulge.modeling.prestretch import check_prestretch
-from scipy.interpolate import CubicHermiteSpline
 
 __all__ = [
     "bulge_profile",

@@ -26,10 +26,11 @@ from pathlib import Path
 
 import numpy as np
 import xarray as xr
+from scipy.interpolate import CubicSpline
+
 from osmobulge import __version__
 from osmobulge.modeling.bulge import MECHANICS_ATTRS, _check_material, bulge_mechanics, locking_volume
 from osmobulge.modeling.materials import LinearElastic
-from scipy.interpolate import CubicSpline
 
 __all__ = ["MechanicsTable", "mechanics_table", "cache_dir", "TABLE_SCHEMA"]
 
