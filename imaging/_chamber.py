@@ -425,7 +425,8 @@ def measure_line(view, line, u, *, polarity, thickness, window):
         return line, thickness, np.nan, np.nan, inl
     # new line: z = a + b u in the old frame
     new = line.shifted(0.0, a)
-    new = Line(new.x0, new.y0, line.angle + np.arctan(b))
+    # offsets along the normal grow as sin(angle - true angle) * u: subtract the slope
+    new = Line(new.x0, new.y0, line.angle - np.arctan(b))
     return new, float(np.median(width[inl])), float(np.median(con[inl])), rms, inl
 
 

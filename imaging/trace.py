@@ -336,7 +336,15 @@ class ChamberTracer:
             well = replace(self.prev.geometry.well, depth=g0.well.depth)
         line = self._coarse_line(view, line)
         win = 0.5 * g0.thickness + 8.0
-        line, thick, con, rms, inl = measure_line(view, line, self._flat_u, polarity=g0.polarity,
+        us = self._flat_u
+        if self.prev is not None and len(self.prev.u):
+            # skip columns where the last dome (its overhang) comes down into the search window
+            low = self.prev.z < 0.5 * g0.thickness + win + 6.0
+            if low.any():
+                du = np.abs(us[:, None] - self.prev.u[low][None, :]).min(axis=1)
+                if (du > 6.0).sum() >= 12:
+                    us = us[du > 6.0]
+        line, thick, con, rms, inl = measure_line(view, line, us, polarity=g0.polarity,
                                                   thickness=g0.thickness, window=win)
         well = self._coarse_walls(view, line, well)
         well, wall_rms = measure_walls(view, line, well, thickness=g0.thickness, window=8.0)

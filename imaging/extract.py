@@ -1,0 +1,625 @@
+r"""From a micrograph series to a dataset of bulge profiles, volumes, areas and rim radii.
+
+:func:`extract` runs the frame-by-frame tracer (:mod:`osmobulge.imaging.trace`)
+over a series read lazily (one frame in memory at a time) and returns one
+:class:`xarray.Dataset` in SI units with CF-style ``units``/``long_name``
+attributes, the input of the permeability fits.  :func:`save_extraction` /
+:func:`load_extraction` write and read it (netCDF via h5netcdf, or zarr v3)
+without loss.
+
+Volumes are the water added: the solid of revolution of the dome about the
+chamber axis, above the membrane's own flat position (the midline of the band
+on the base's top surface, measured in every frame), not relative to the first
+frame (main text Sec. 2.3, 3.1).  With a chamber :math:`(a, h)`,
+:math:`\tilde V = \Delta V/(\pi a^3)` and :math:`V/V_0 = 1 + \Delta V/(\pi a^2 h)`
+(main text Eqn 4).
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+import warnings
+from collections.abc import Mapping
+from pathlib import Path
+
+import numpy as np
+import xarray as xr
+
+from osmobulge import __version__
+from osmobulge.imaging._chamber import FrameView
+from osmobulge.imaging.geometry import fit_ellipse, revolution_measures
+from osmobulge.imaging.trace import FLAGS, ChamberTracer, TraceSettings
+
+__all__ = ["extract", "save_extraction", "load_extraction", "ERRORS", "FLAGS"]
+
+ERRORS = ("flag", "raise")
+_DIRECTIONS = ("auto", "up", "down", "left", "right")
+_FIGURES = {
+    "residual_rms": ("m", "RMS distance of the traced points from the profile spline"),
+    "volume_disagreement": ("1", "|V_left - V_right| / max(V, 5 px layer over the well)"),
+    "dome_contrast": ("1", "median band contrast along the dome / flat band contrast"),
+    "gap_length": ("1", "longest run without membrane along the dome / membrane thickness"),
+    "rim_contact": ("1", "membrane on the surface just outside the rims (1 = on it, 0 = lifted)"),
+    "neighbour_gap": ("m", "gap between the dome and another (neighbour's) membrane"),
+}
+
+
+# ------------------------------------------------------------------------------------ sources
+class _ArraySource:
+    def __init__(self, frames):
+        self.frames = frames
+        self.pixel_size = None
+        self.timestamps = None
+        self.name = "array"
+        self.names = None
+
+    def __len__(self):
+        return len(self.frames)
+
+    def __getitem__(self, i):
+        return np.asarray(self.frames[i])
+
+
+def _open(source):
+    """A lazy frame sequence with optional ``pixel_size`` (m) and ``timestamps`` (s)."""
+    if isinstance(source, str | os.PathLike):
+        path = Path(source)
+        if not path.exists():
+            raise FileNotFoundError(f"source {str(path)!r} does not exist")
+        try:
+            from osmobulge.imaging import io as _io
+        except ImportError as err:  # pragma: no cover - io is written by another helper
+            raise NotImplementedError("reading files needs osmobulge.imaging.io (not available)") from err
+        for name in ("open_series", "read_series"):
+            if hasattr(_io, name):
+                return _Reader(getattr(_io, name)(path), str(path))
+        raise NotImplementedError("osmobulge.imaging.io has no open_series/read_series reader")
+    if isinstance(source, np.ndarray) or hasattr(source, "__array__") or isinstance(source, list | tuple):
+        if isinstance(source, np.ndarray) and source.ndim == 2:
+            source = source[None]
+        shape = np.shape(source[0]) if len(source) else ()
+        if len(shape) != 2:
+            raise ValueError(f"source array must have shape (T, H, W), got frames of shape {shape}")
+        return _ArraySource(source)
+    raise TypeError(f"source must be a path or an array of shape (T, H, W), got {type(source).__name__}")
+
+
+class _Reader:
+    """Adapter over an :mod:`osmobulge.imaging.io` series object."""
+
+    def __init__(self, series, name):
+        self.series = series
+        self.name = name
+        self.pixel_size = getattr(series, "pixel_size", None)
+        ts = getattr(series, "timestamps", None)
+        if ts is None:
+            ts = getattr(series, "times", None)
+        self.timestamps = None if ts is None else np.asarray(ts, float)
+        self.names = getattr(series, "names", None) or getattr(series, "filenames", None)
+
+    def __len__(self):
+        return len(self.series)
+
+    def __getitem__(self, i):
+        return np.asarray(self.series[i])
+
+
+def _chamber_attrs(chamber):
+    if chamber is None:
+        return {}
+    for k in ("radius", "depth", "thickness"):
+        v = getattr(chamber, k, None)
+        if v is None or not np.isfinite(float(v)) or float(v) <= 0:
+            raise ValueError(f"chamber.{k} must be a positive length in m, got {v!r}")
+        if float(v) >= 0.1:
+            raise ValueError(f"chamber.{k}={v!r} is not a plausible length in m (give metres)")
+    if hasattr(chamber, "to_attrs"):
+        return {k: float(v) for k, v in chamber.to_attrs().items()}
+    out = {"chamber_radius": float(chamber.radius), "chamber_depth": float(chamber.depth),
+           "membrane_thickness": float(chamber.thickness)}
+    for k in ("concentration", "feed_concentration", "temperature", "vant_hoff"):
+        if getattr(chamber, k, None) is not None:
+            out[k] = float(getattr(chamber, k))
+    return out
+
+
+def _safe_attrs(d, prefix=""):
+    """Flatten a mapping into netCDF-safe attrs (no dicts, no None, no bools)."""
+    out = {}
+    for k, v in (d or {}).items():
+        key = f"{prefix}{k}"
+        if isinstance(v, Mapping):
+            out.update(_safe_attrs(v, key + "_"))
+        elif v is None:
+            out[key] = "none"
+        elif isinstance(v, bool | np.bool_):
+            out[key] = int(v)
+        elif isinstance(v, str | int | float | np.integer | np.floating):
+            out[key] = v
+        elif isinstance(v, list | tuple | np.ndarray):
+            arr = np.asarray(v)
+            out[key] = arr if arr.dtype.kind in "iuf" else ", ".join(str(x) for x in np.ravel(arr))
+        else:
+            out[key] = str(v)
+    return out
+
+
+def _points_px(points_m, pixel_size, name):
+    p = np.asarray(points_m, float)
+    if p.ndim != 2 or p.shape[1] != 2 or len(p) < 4:
+        raise ValueError(f"{name} must be arrays of shape (N >= 4, 2) of (x, y) in m, got shape {p.shape}")
+    return p / pixel_size  # (x=col, y=row) px
+
+
+# ------------------------------------------------------------------------------------ extract
+def extract(
+    source,
+    *,
+    pixel_size=None,
+    chamber=None,
+    frame_interval=None,
+    bulge_direction="auto",
+    chamber_region=None,
+    errors="flag",
+    progress=True,
+    priors=None,
+    manual_profiles=None,
+    metadata=None,
+    settings=None,
+    n_profile=201,
+    fit_prestretch=True,
+) -> xr.Dataset:
+    r"""Extract bulge profiles, volumes, areas and rim radii from a micrograph series.
+
+    Parameters
+    ----------
+    source : str, Path or ndarray of shape (T, H, W)
+        A series file or folder (read lazily by :mod:`osmobulge.imaging.io`) or
+        the frames themselves (8- or 16-bit or float).  The first frame must show
+        the flat membrane.
+    pixel_size : float, m, optional
+        Square pixel size; required when the source carries none; must agree
+        with the file's value when both are given.
+    chamber : Chamber, optional
+        :class:`osmobulge.modeling.transport.Chamber` (or any object with
+        ``radius``, ``depth``, ``thickness`` in m): gives :math:`a` and :math:`h`
+        for ``vtilde``, ``volume_ratio``, ``area_ratio`` and ``lambda_pre``.
+        Without it, :math:`a` is the rim radius and :math:`h` the well depth
+        measured in the first frame.
+    frame_interval : float, s, optional
+        Time between frames when the source has no timestamps.
+    bulge_direction : {"auto", "up", "down", "left", "right"}
+        Direction the dome grows in the image.
+    chamber_region : int or tuple of float, optional
+        Which well when several are in the field: index from the left in the
+        bulge-up view, or ``(col0, col1)`` view columns holding its axis.
+    errors : {"flag", "raise"}
+        A frame that cannot be measured is flagged ``no_membrane`` and kept
+        ("flag"), or raises ("raise").
+    progress : bool
+        Show a progress bar (rich).
+    priors : dict of int -> ndarray of shape (N, 2), optional
+        Manual points ``(x, y)`` (m, image coordinates ``x = col * p``,
+        ``y = row * p``) for some frames: the tracer starts from them in that
+        frame and from the nearest one in frames where it has no good previous
+        trace (the semi-automatic mode).
+    manual_profiles : dict of int -> ndarray of shape (N, 2), optional
+        Manual profiles (same coordinates, ordered along the curve from rim to
+        rim) that replace the automatic trace of their frames
+        (``profile_source = "manual"``); volume and area are computed from them.
+    metadata : mapping, optional
+        Experiment metadata stored in the attrs (flattened, netCDF-safe).
+    settings : TraceSettings, optional
+        Tracer tuning knobs (recorded in the attrs).
+    n_profile : int
+        Arc-length samples of the stored profile.
+    fit_prestretch : bool
+        Fit :math:`\lambda_{pre}(\tilde V)` (supplement Sec. 5.7) to the good frames.
+
+    Returns
+    -------
+    xarray.Dataset
+        Over ``time`` (s; coordinate ``frame``) and ``s`` (arc length along the
+        profile, rim to rim, normalised to 1): ``profile_x``, ``profile_z`` (m,
+        signed radial position and height above the flat membrane),
+        ``profile_col``/``profile_row`` (px in the stored frame),
+        ``profile_source``, ``bulge_height``, ``volume`` (m^3, water added),
+        ``volume_left``/``volume_right``, ``volume_ellipse``, ``area``,
+        ``area_ratio``, ``rim_radius`` (m), ``lambda_pre``, ``lambda_pre_fit``,
+        ``vtilde`` and ``volume_ratio`` (with ``chamber``), ``flag``,
+        ``flag_figure``, ``flag_value``, the quality figures, tilt and drift.
+        Attrs: software version, every extraction parameter, the chamber
+        (``chamber_radius``, ``chamber_depth``, ``membrane_thickness``, ...) and
+        the experiment metadata.
+
+    Notes
+    -----
+    Volume :math:`V = -\oint \pi r^2 dz` and area :math:`A = 2\pi\oint r\,ds` of
+    each half of the dome about the axis (:mod:`osmobulge.imaging.geometry`);
+    the reported values are the means of the two halves and their
+    disagreement is a quality figure.  :math:`\tilde V = \Delta V/(\pi a^3)`,
+    :math:`V/V_0 = 1 + \Delta V/(\pi a^2 h)` (main text Eqn 4), area ratio
+    :math:`A/(\pi a^2)`, :math:`\lambda_{pre} = R/a` (supplement Sec. 5.7).
+    """
+    if errors not in ERRORS:
+        raise ValueError(f"errors must be one of {ERRORS}, got {errors!r}")
+    if bulge_direction not in _DIRECTIONS:
+        raise ValueError(f"bulge_direction must be one of {_DIRECTIONS}, got {bulge_direction!r}")
+    if not (isinstance(n_profile, int | np.integer) and n_profile >= 11):
+        raise ValueError(f"n_profile must be an int >= 11, got {n_profile!r}")
+    settings = settings or TraceSettings()
+    if not isinstance(settings, TraceSettings):
+        raise TypeError(f"settings must be a TraceSettings, got {type(settings).__name__}")
+    src = _open(source)
+    n = len(src)
+    if n == 0:
+        raise ValueError("source holds no frames")
+    # -- pixel size and times -----------------------------------------------------------
+    p = pixel_size
+    if p is not None and not (np.isfinite(p) and 1e-9 <= float(p) <= 1e-3):
+        raise ValueError(f"pixel_size must be in [1e-9, 1e-3] m/px, got {pixel_size!r}")
+    if src.pixel_size is not None:
+        if p is not None and not np.isclose(float(p), float(src.pixel_size), rtol=1e-3):
+            raise ValueError(f"pixel_size={p!r} m conflicts with the file's {src.pixel_size!r} m: "
+                             "drop the argument or fix the metadata")
+        p = float(src.pixel_size) if p is None else float(p)
+    if p is None:
+        raise ValueError("pixel size unknown: the source carries none, pass pixel_size= (m/px)")
+    p = float(p)
+    if src.timestamps is not None and len(src.timestamps) == n and np.all(np.isfinite(src.timestamps)):
+        times = np.asarray(src.timestamps, float)
+        if frame_interval is not None:
+            dt_file = float(np.median(np.diff(times))) if n > 1 else float(frame_interval)
+            if not np.isclose(dt_file, float(frame_interval), rtol=0.01):
+                raise ValueError(f"frame_interval={frame_interval!r} s conflicts with the file's timestamps "
+                                 f"(median interval {dt_file:.6g} s): drop the argument or fix the metadata")
+    elif frame_interval is not None:
+        if not (np.isfinite(frame_interval) and frame_interval > 0):
+            raise ValueError(f"frame_interval must be > 0 s, got {frame_interval!r}")
+        times = np.arange(n) * float(frame_interval)
+    else:
+        raise ValueError("frame times unknown: the source carries no timestamps, pass frame_interval= (s)")
+    chamber_attrs = _chamber_attrs(chamber)
+    priors_px = {int(k): _points_px(v, p, "priors") for k, v in (priors or {}).items()}
+    manual_px = {int(k): _points_px(v, p, "manual_profiles") for k, v in (manual_profiles or {}).items()}
+    for name, d in (("priors", priors_px), ("manual_profiles", manual_px)):
+        bad = [k for k in d if not 0 <= k < n]
+        if bad:
+            raise ValueError(f"{name} has frame indices {bad} outside 0..{n - 1}")
+
+    # -- the tracer ------------------------------------------------------------------------
+    first = src[0]
+    tracer = ChamberTracer(first, bulge_direction=bulge_direction, chamber_region=chamber_region,
+                           thickness=None, settings=settings)
+    k_rot = tracer.k
+    view_shape = FrameView(first, k_rot).shape
+
+    # -- per-frame storage (memory flat in T: scalars and fixed-length profiles only) ----------
+    scal = {k: np.full(n, np.nan) for k in (
+        "bulge_height", "volume_left", "volume_right", "area_left", "area_right", "rim_radius", "residual_rms",
+        "volume_disagreement", "dome_contrast", "gap_length", "rim_contact", "neighbour_gap", "tilt", "drift_x",
+        "drift_y", "axis_col", "axis_row", "volume_ellipse", "ellipse_a", "ellipse_b", "ellipse_rms",
+        "flag_value", "well_depth", "band_thickness", "wall_rms", "line_rms")}
+    flag = np.array(["no_membrane"] * n, dtype=object)
+    flag_figure = np.array([""] * n, dtype=object)
+    source_kind = np.array(["auto"] * n, dtype=object)
+    message = np.array([""] * n, dtype=object)
+    px = np.full((n, n_profile), np.nan)
+    pz = np.full((n, n_profile), np.nan)
+    pcol = np.full((n, n_profile), np.nan)
+    prow = np.full((n, n_profile), np.nan)
+    plen = np.full(n, np.nan)
+
+    prior_frames = np.array(sorted(priors_px), int)
+
+    def guide_for(i):
+        if i in priors_px:
+            return priors_px[i]
+        if tracer.prev is not None and tracer.prev.flag == "ok":
+            return None  # tracking from the previous frame
+        if prior_frames.size:
+            return priors_px[int(prior_frames[np.argmin(np.abs(prior_frames - i))])]
+        return None
+
+    iterator = range(n)
+    bar = None
+    if progress:
+        from rich.progress import Progress
+
+        bar = Progress(transient=True)
+        task = bar.add_task("extracting", total=n)
+        bar.start()
+    try:
+        for i in iterator:
+            try:
+                frame = first if i == 0 else src[i]
+                man = manual_px.get(i)
+                res = tracer.process(frame, i, guide=None if man is not None else guide_for(i), manual=man)
+            except Exception as err:  # noqa: BLE001 - batch runs record failures as data
+                if errors == "raise":
+                    raise
+                message[i] = f"{type(err).__name__}: {err}"
+                flag[i] = "no_membrane"
+                flag_figure[i] = "exception"
+                if bar is not None:
+                    bar.advance(task)
+                continue
+            _store(i, res, tracer, k_rot, view_shape, frame.shape, p, n_profile, scal, flag, flag_figure,
+                   source_kind, message, px, pz, pcol, prow, plen)
+            if bar is not None:
+                bar.advance(task)
+    finally:
+        if bar is not None:
+            bar.stop()
+
+    return _dataset(times, p, chamber_attrs, tracer, scal, flag, flag_figure, source_kind, message, px, pz, pcol,
+                    prow, plen, n_profile, src, settings, bulge_direction, chamber_region, errors, metadata,
+                    fit_prestretch, priors_px, manual_px)
+
+
+def _store(i, res, tracer, k_rot, view_shape, frame_shape, p, n_profile, scal, flag, flag_figure, source_kind,
+           message, px, pz, pcol, prow, plen):
+    g = res.geometry
+    flag[i] = res.flag
+    flag_figure[i] = res.flag_figure
+    source_kind[i] = res.source
+    message[i] = res.message
+    scal["flag_value"][i] = res.flag_value
+    scal["drift_x"][i], scal["drift_y"][i] = res.drift
+    for k in ("residual_rms", "volume_disagreement", "dome_contrast", "gap_length", "rim_contact", "neighbour_gap"):
+        v = res.figures.get(k, np.nan)
+        scal[k][i] = v if np.isfinite(v) else (np.inf if v == np.inf else np.nan)
+    if g is None:
+        return
+    view = FrameView(np.empty(frame_shape, np.uint8), k_rot)
+    r, c = view.to_frame(g.line.x0, g.line.y0)
+    scal["axis_col"][i], scal["axis_row"][i] = c, r
+    # tilt of the device from its upright (bulge-up) view, counter-clockwise as displayed
+    scal["tilt"][i] = -np.degrees(g.line.angle)
+    scal["rim_radius"][i] = g.rim_radius * p
+    scal["well_depth"][i] = g.well.depth * p
+    scal["band_thickness"][i] = g.thickness * p
+    scal["wall_rms"][i] = g.wall_rms * p
+    scal["line_rms"][i] = g.line_rms * p
+    if not len(res.u):
+        return
+    scal["volume_left"][i] = res.volume_left * p**3
+    scal["volume_right"][i] = res.volume_right * p**3
+    scal["area_left"][i] = res.area_left * p**2
+    scal["area_right"][i] = res.area_right * p**2
+    scal["bulge_height"][i] = res.height * p
+    scal["residual_rms"][i] = res.residual_rms * p
+    if np.isfinite(scal["neighbour_gap"][i]):
+        scal["neighbour_gap"][i] *= p
+    # the profile on an even arc-length grid
+    seg = np.hypot(np.diff(res.u), np.diff(res.z))
+    sc = np.r_[0.0, np.cumsum(seg)]
+    plen[i] = sc[-1] * p
+    si = np.linspace(0.0, sc[-1], n_profile)
+    uu, zz = np.interp(si, sc, res.u), np.interp(si, sc, res.z)
+    px[i], pz[i] = uu * p, zz * p
+    vp = g.line.point(uu, zz)
+    rr, cc = view.to_frame(vp[:, 0], vp[:, 1])
+    pcol[i], prow[i] = cc, rr
+    # the paper's description: an ellipse through the traced points, integrated the same way
+    pts_u = res.points_u if len(res.points_u) >= 5 else res.u
+    pts_z = res.points_z if len(res.points_z) >= 5 else res.z
+    sel = np.linspace(0, len(pts_u) - 1, min(len(pts_u), 400)).astype(int)
+    if np.ptp(pts_z) > 1.0:
+        ell = fit_ellipse(np.c_[pts_u[sel], pts_z[sel]])
+        if ell:
+            scal["ellipse_a"][i], scal["ellipse_b"][i] = (x * p for x in ell.semi_axes)
+            scal["ellipse_rms"][i] = ell.rms * p
+            scal["volume_ellipse"][i] = _ellipse_volume(ell) * p**3
+
+
+def _ellipse_volume(ell):
+    """Volume of the solid of revolution of the ellipse arc above z = 0 (nan if it does not cross z = 0)."""
+    t = np.linspace(0.0, 2 * np.pi, 4001)
+    e = ell.points(t)
+    above = e[:, 1] >= 0
+    if above.all() or not above.any():
+        return np.nan
+    # roll so the arc above z = 0 is contiguous, ordered by increasing parameter
+    start = int(np.flatnonzero(~above)[-1]) + 1
+    e = np.roll(e, -start, axis=0)
+    above = np.roll(above, -start)
+    arc = e[: int(np.flatnonzero(~above)[0])] if (~above).any() else e
+    if len(arc) < 3:
+        return np.nan
+    try:
+        m = revolution_measures(arc[:, 0], arc[:, 1])
+    except ValueError:
+        return np.nan
+    return m.volume
+
+
+def _dataset(times, p, chamber_attrs, tracer, scal, flag, flag_figure, source_kind, message, px, pz, pcol, prow,
+             plen, n_profile, src, settings, bulge_direction, chamber_region, errors, metadata, do_fit, priors_px,
+             manual_px):
+    n = len(times)
+    ok = np.array([f == "ok" for f in flag])
+    volume = 0.5 * (scal["volume_left"] + scal["volume_right"])
+    area = 0.5 * (scal["area_left"] + scal["area_right"])
+    # reference radius and depth: the chamber's, else measured in the first frame
+    if chamber_attrs:
+        a, h, ref_src = chamber_attrs["chamber_radius"], chamber_attrs["chamber_depth"], "chamber"
+    else:
+        a, h, ref_src = tracer.ref.rim_radius * p, tracer.ref.well.depth * p, "image (first frame)"
+    vtilde = volume / (np.pi * a**3)
+    volume_ratio = 1.0 + volume / (np.pi * a * a * h) if np.isfinite(h) else np.full(n, np.nan)
+    lam = scal["rim_radius"] / a
+
+    def var(data, units, long_name, dims=("time",), **extra):
+        attrs = {"units": units, "long_name": long_name} if units is not None else {"long_name": long_name}
+        attrs.update(extra)
+        return (dims, data, attrs)
+
+    data = {
+        "profile_x": var(px, "m", "signed radial position of the membrane midline from the chamber axis",
+                         ("time", "s")),
+        "profile_z": var(pz, "m", "height of the membrane midline above the flat membrane", ("time", "s")),
+        "profile_col": var(pcol, "px", "membrane midline column in the stored frame", ("time", "s")),
+        "profile_row": var(prow, "px", "membrane midline row in the stored frame", ("time", "s")),
+        "profile_length": var(plen, "m", "arc length of the membrane midline, rim to rim"),
+        "profile_source": var(source_kind.astype(str), None, "origin of the profile: auto (traced) or manual"),
+        "bulge_height": var(scal["bulge_height"], "m", "dome height on the chamber axis above the flat membrane"),
+        "volume": var(volume, "m3", "water added: bulge volume above the flat membrane (mean of the halves)"),
+        "volume_left": var(scal["volume_left"], "m3", "bulge volume from the left half of the profile"),
+        "volume_right": var(scal["volume_right"], "m3", "bulge volume from the right half of the profile"),
+        "volume_ellipse": var(scal["volume_ellipse"], "m3", "bulge volume of the fitted ellipse arc (paper Sec. 2.3)"),
+        "ellipse_a": var(scal["ellipse_a"], "m", "ellipse semi-axis a"),
+        "ellipse_b": var(scal["ellipse_b"], "m", "ellipse semi-axis b"),
+        "ellipse_rms": var(scal["ellipse_rms"], "m", "RMS distance of the traced points from the ellipse"),
+        "area": var(area, "m2", "membrane area of the dome (mean of the halves)"),
+        "area_left": var(scal["area_left"], "m2", "membrane area from the left half"),
+        "area_right": var(scal["area_right"], "m2", "membrane area from the right half"),
+        "area_ratio": var(area / (np.pi * a * a), "1", "membrane area ratio A/A0, A0 = pi a^2"),
+        "vtilde": var(vtilde, "1", "dimensionless bulge volume dV/(pi a^3) (Eqn 4)"),
+        "volume_ratio": var(volume_ratio, "1", "chamber volume ratio V/V0 = 1 + dV/(pi a^2 h) (Eqn 4)"),
+        "rim_radius": var(scal["rim_radius"], "m", "rim radius: half the distance between the wall tops"),
+        "lambda_pre": var(lam, "1", "rim pre-stretch R/a (supplement Sec. 5.7)"),
+        "flag": var(flag.astype(str), None, "frame quality: " + "|".join(FLAGS)),
+        "flag_figure": var(flag_figure.astype(str), None, "quality figure that set the flag"),
+        "flag_value": var(scal["flag_value"], "1", "value of the figure that set the flag (units of that figure)"),
+        "message": var(message.astype(str), None, "why a frame could not be measured"),
+        "tilt": var(scal["tilt"], "deg", "tilt of the flat membrane, counter-clockwise as displayed"),
+        "drift_x": var(scal["drift_x"], "px", "drift of the chamber along the view columns since frame 0"),
+        "drift_y": var(scal["drift_y"], "px", "drift of the chamber along the view rows since frame 0"),
+        "axis_col": var(scal["axis_col"], "px", "column where the chamber axis meets the flat membrane"),
+        "axis_row": var(scal["axis_row"], "px", "row where the chamber axis meets the flat membrane"),
+        "well_depth": var(scal["well_depth"], "m", "well depth measured in the first frame"),
+        "band_thickness": var(scal["band_thickness"], "m", "membrane band thickness on the surface (image)"),
+        "wall_rms": var(scal["wall_rms"], "m", "scatter of the wall edge points about the wall lines"),
+        "line_rms": var(scal["line_rms"], "m", "scatter of the flat band centres about the flat line"),
+    }
+    for k, (u, ln) in _FIGURES.items():
+        data[k] = var(scal[k], u, ln)
+    coords = {
+        "time": ("time", np.asarray(times, float), {"units": "s", "long_name": "time since the first frame"}),
+        "frame": ("time", np.arange(n), {"long_name": "frame index"}),
+        "s": ("s", np.linspace(0.0, 1.0, n_profile), {"units": "1", "long_name": "arc length from the left rim / length"}),
+    }
+    attrs = {
+        "title": "bulge profiles extracted from a micrograph series",
+        "software": "osmobulge",
+        "osmobulge_version": __version__,
+        "source": str(src.name),
+        "pixel_size": p,
+        "frame_interval": float(np.median(np.diff(times))) if n > 1 else 0.0,
+        "bulge_direction": tracer.bulge_direction,
+        "bulge_direction_requested": bulge_direction,
+        "chamber_region": "auto" if chamber_region is None else str(chamber_region),
+        "errors": errors,
+        "n_profile": int(n_profile),
+        "polarity": int(tracer.ref.polarity),
+        "blur_sigma_px": float(tracer.blur),
+        "reference_radius": float(a),
+        "reference_depth": float(h),
+        "reference_source": ref_src,
+        "prior_frames": np.array(sorted(priors_px), np.int64) if priors_px else "none",
+        "manual_frames": np.array(sorted(manual_px), np.int64) if manual_px else "none",
+        "Conventions": "CF-1.8",
+    }
+    attrs.update(settings.to_attrs())
+    attrs.update(chamber_attrs)
+    attrs.update(_safe_attrs(metadata, "meta_"))
+    ds = xr.Dataset(data, coords=coords, attrs=attrs)
+    # lambda_pre(Vtilde): second-order polynomial through (0, 1) (supplement Sec. 5.7)
+    fit_ok = ok & np.isfinite(vtilde) & np.isfinite(lam) & (vtilde >= 0)
+    if do_fit and fit_ok.sum() >= 3 and np.ptp(vtilde[fit_ok]) > 0:
+        from osmobulge.modeling.prestretch import fit_prestretch as _fit
+
+        pre = _fit(vtilde[fit_ok], lam[fit_ok])
+        ds["lambda_pre_fit"] = var(pre(np.clip(vtilde, 0, None)), "1",
+                                   "fitted rim pre-stretch 1 + c1 Vtilde + c2 Vtilde^2 (supplement Sec. 5.7)")
+        ds.attrs["prestretch_c1"] = float(pre.c1)
+        ds.attrs["prestretch_c2"] = float(pre.c2)
+        ds.attrs["prestretch_frames"] = int(fit_ok.sum())
+    else:
+        ds["lambda_pre_fit"] = var(np.full(n, np.nan), "1", "fitted rim pre-stretch (not enough good frames)")
+        ds.attrs["prestretch_c1"] = np.nan
+        ds.attrs["prestretch_c2"] = np.nan
+        ds.attrs["prestretch_frames"] = int(fit_ok.sum())
+    return ds
+
+
+# ------------------------------------------------------------------------------------ save / load
+_FORMATS = ("netcdf", "zarr")
+
+
+def _fmt(path, fmt):
+    if fmt is None:
+        fmt = "zarr" if str(path).rstrip("/").endswith(".zarr") else "netcdf"
+    if fmt not in _FORMATS:
+        raise ValueError(f"fmt must be one of {_FORMATS}, got {fmt!r}")
+    return fmt
+
+
+def save_extraction(ds, path, *, fmt=None):
+    """Write an extraction dataset without loss (netCDF via h5netcdf, or zarr v3), atomically.
+
+    Parameters
+    ----------
+    ds : xarray.Dataset
+    path : str or Path
+        ``*.nc`` (netCDF) or ``*.zarr`` (a zarr v3 store, a folder).
+    fmt : {"netcdf", "zarr"}, optional
+        Default from the suffix.
+
+    Returns
+    -------
+    pathlib.Path
+    """
+    path = Path(path)
+    fmt = _fmt(path, fmt)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    if fmt == "netcdf":
+        fd, tmp = tempfile.mkstemp(suffix=".nc.part", dir=path.parent)
+        os.close(fd)
+        try:
+            ds.to_netcdf(tmp, engine="h5netcdf")
+            os.replace(tmp, path)
+        finally:
+            if os.path.exists(tmp):
+                os.remove(tmp)
+        return path
+    tmp = Path(tempfile.mkdtemp(suffix=".zarr.part", dir=path.parent))
+    import shutil
+
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # zarr v3 notes on string dtypes
+            ds.to_zarr(tmp, mode="w", zarr_format=3, consolidated=False)
+        if path.exists():
+            shutil.rmtree(path)
+        os.replace(tmp, path)
+    finally:
+        if tmp.exists():
+            shutil.rmtree(tmp)
+    return path
+
+
+def load_extraction(path, *, fmt=None):
+    """Read a dataset written by :func:`save_extraction` (fully loaded into memory).
+
+    Parameters
+    ----------
+    path : str or Path
+    fmt : {"netcdf", "zarr"}, optional
+
+    Returns
+    -------
+    xarray.Dataset
+    """
+    path = Path(path)
+    fmt = _fmt(path, fmt)
+    if not path.exists():
+        raise FileNotFoundError(f"{str(path)!r} does not exist")
+    if fmt == "netcdf":
+        with xr.open_dataset(path, engine="h5netcdf") as ds:
+            return ds.load()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return xr.open_zarr(path, zarr_format=3, consolidated=False).load()
