@@ -43,7 +43,7 @@ EXTRACTION_FILE = Path("results") / "extraction.nc"
 
 # --------------------------------------------------------------------------- frames
 def open_frames(exp):
-    """The experiment's frames as a lazy ``(T, H, W)`` array, plus pixel size and times from the files.
+    """The experiment's frames as a lazy ``(T, H, W)`` array, with pixel size and times.
 
     Parameters
     ----------
@@ -51,36 +51,57 @@ def open_frames(exp):
 
     Returns
     -------
-    frames : array_like of shape (T, H, W)
-        Lazy (dask) array: a frame is read when napari shows it.
+    frames : dask.array.Array of shape (T, H, W)
+        One chunk per frame: a frame is read when napari shows it.
     pixel_size : float or None, m
-        From the files' metadata, if any.
+        From ``experiment.toml`` or the files (:func:`osmobulge.imaging.io.open_series`
+        checks that they agree).
     times : ndarray of shape (T,) or None, s
-        From the files' metadata, if any.
+        From ``experiment.toml`` or the files.
     """
-    try:
-        from osmobulge.imaging import io as imio
-    except ImportError:  # the imaging readers are not there yet: plain TIFF files
-        imio = None
-    if imio is not None and hasattr(imio, "open_series"):
-        series = imio.open_series(exp.frames_source())
-        return series.to_dask(), series.pixel_size, series.timestamps
-    return _open_tiffs(exp.frame_files()), None, None
+    import warnings
 
-
-def _open_tiffs(files):
-    import dask
     import dask.array as da
-    import tifffile
 
-    files = list(files)
-    if len(files) == 1:
-        store = tifffile.imread(files[0], aszarr=True)
-        arr = da.from_zarr(store)
-        return arr if arr.ndim == 3 else arr[None]
-    first = tifffile.imread(files[0])
-    parts = [da.from_delayed(dask.delayed(tifffile.imread)(f), shape=first.shape, dtype=first.dtype) for f in files]
-    return da.stack(parts)
+    from osmobulge.imaging.io import open_series
+
+    im = exp.imaging
+    kw = {"pixel_size": im.pixel_size, "missing": "warn"}
+    if not im.timestamps_from_files:
+        if im.timestamps is not None:
+            kw["timestamps"] = np.asarray(im.timestamps, float)
+        elif im.frame_interval is not None:
+            kw["frame_interval"] = im.frame_interval
+    source = exp.frames_source()
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message=".*not in the metadata.*", category=UserWarning)
+        if isinstance(source, list | tuple):
+            files = [Path(f) for f in source]
+            folder = files[0].parent
+            if all(f.parent == folder for f in files) and len(files) == len(_image_files(folder)):
+                source = folder
+            else:  # a glob picking some files of a folder: one series per file, stacked
+                kw_file = {k: v for k, v in kw.items() if k not in ("timestamps", "frame_interval")}
+                parts = [open_series(f, order="name", **kw_file) for f in files]
+                frames = da.concatenate([p.to_dask() for p in parts])
+                px = parts[0].pixel_size
+                times = kw.get("timestamps")
+                if times is None and "frame_interval" in kw:
+                    times = np.arange(frames.shape[0]) * kw["frame_interval"]
+                return frames, _finite_or_none(px), times
+        series = open_series(source, order="name", **kw)
+    times = np.asarray(series.timestamps, float)
+    return series.to_dask(), _finite_or_none(series.pixel_size), times if np.all(np.isfinite(times)) else None
+
+
+def _finite_or_none(v):
+    return float(v) if v is not None and np.isfinite(v) else None
+
+
+def _image_files(folder: Path) -> list[Path]:
+    from osmobulge.imaging.io import IMAGE_EXTENSIONS
+
+    return [p for p in folder.iterdir() if p.is_file() and p.suffix.lower() in IMAGE_EXTENSIONS]
 
 
 # --------------------------------------------------------------------------- session

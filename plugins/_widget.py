@@ -424,12 +424,12 @@ class ProfilePicker(Container):
             self.session.picks.get(frame, np.empty((0, 2))),
             self.session.manual_fit(frame).points_rc if self.session.manual_fit(frame) is not None else None)
         shapes, colors = [], []
-        if len(fit.spline_rc) >= 2:
-            shapes.append(np.column_stack([np.full(len(fit.spline_rc), frame, float), fit.spline_rc]))
-            colors.append(COLORS["accepted" if accepted else "pending"])
         if len(fit.ellipse_rc) >= 2:
             shapes.append(np.column_stack([np.full(len(fit.ellipse_rc), frame, float), fit.ellipse_rc]))
             colors.append(COLORS["ellipse"])
+        if len(fit.spline_rc) >= 2:  # drawn last: on top of the ellipse
+            shapes.append(np.column_stack([np.full(len(fit.spline_rc), frame, float), fit.spline_rc]))
+            colors.append(COLORS["accepted" if accepted else "pending"])
         self.fit_layer.data = []
         if shapes:
             self.fit_layer.add_paths(shapes, edge_color=colors, edge_width=1.0)

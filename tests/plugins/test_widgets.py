@@ -140,3 +140,60 @@ def test_keyboard_shortcuts(make_napari_viewer, experiment):
     assert load_curation(folder).excluded[1]["reason"] == "out_of_focus"
     press("Shift-U")
     assert 1 not in load_curation(folder).excluded
+
+
+def _canvas_to_data(viewer, rows, cols, shot_shape):
+    """Canvas pixel (row, col) -> data (row, col) px of the image layer (2-D view, no rotation)."""
+    h, w = shot_shape[:2]
+    canvas_h, canvas_w = viewer.window._qt_viewer.canvas.size  # logical pixels
+    ratio = h / canvas_h
+    cy, cx = viewer.scene.camera.center[-2:]
+    zoom = viewer.scene.camera.zoom * ratio
+    scale = PIXEL * 1e6
+    y = cy + (np.asarray(rows) + 0.5 - h / 2) / zoom
+    x = cx + (np.asarray(cols) + 0.5 - w / 2) / zoom
+    return y / scale, x / scale
+
+
+def test_screenshot_overlay_is_on_the_profile(make_napari_viewer, experiment, tmp_path):
+    """A screenshot with the accepted profile overlaid: its pixels lie on the true membrane midline."""
+    import os
+
+    from skimage.io import imsave
+
+    from osmobulge.plugins._widget import COLORS, CurationWidget, ProfilePicker
+
+    folder, truth = experiment
+    viewer = make_napari_viewer(show=True)
+    _open(viewer, folder)
+    cw, pp = CurationWidget(viewer), ProfilePicker(viewer)
+    viewer.window.add_dock_widget(cw, name="Curation", area="right")
+    viewer.window.add_dock_widget(pp, name="Profile picker", area="right")
+    viewer.dims.set_current_step(0, BAD)
+    pp.set_points(_clicks(truth, BAD, n=14))
+    pp.accept()
+    assert COLORS["accepted"] == "lime"
+    pp.points_layer.visible = False  # only the fitted curves in the colour test
+    viewer.reset_view()
+    shot = viewer.screenshot(canvas_only=True, flash=False)
+    imsave(tmp_path / "overlay.png", shot, check_contrast=False)
+    assert (tmp_path / "overlay.png").stat().st_size > 1000
+    r, g, b = (shot[..., i].astype(int) for i in range(3))
+    lime = (g > 180) & (r < 110) & (b < 110)  # the accepted spline
+    cyan = (g > 180) & (b > 180) & (r < 110)  # the ellipse
+    assert lime.sum() > 100 and cyan.sum() > 20
+    rows, cols = np.nonzero(lime | cyan)
+    assert rows.size > 100, "no overlay pixels in the screenshot"
+    y, x = _canvas_to_data(viewer, rows, cols, shot.shape)
+    mid = truth_midline_rc(truth, BAD)
+    # every overlay pixel is within 1.5 data px of the true midline ...
+    d = np.min(np.hypot(y[:, None] - mid[None, :, 0], x[:, None] - mid[None, :, 1]), axis=1)
+    zoom_px = viewer.scene.camera.zoom * PIXEL * 1e6  # screen pixels per data pixel
+    assert np.percentile(d, 99) < 1.5 + 1.5 / zoom_px, np.percentile(d, [50, 90, 99])
+    # ... and the overlay covers the midline from rim to rim
+    cover = np.min(np.hypot(mid[:, None, 0] - y[None, :], mid[:, None, 1] - x[None, :]), axis=1)
+    assert np.mean(cover < 1.5) > 0.95
+    if os.environ.get("OSMOBULGE_SCREENSHOT_DIR"):  # regenerate the docs figure
+        pp.points_layer.visible = True
+        out = os.path.join(os.environ["OSMOBULGE_SCREENSHOT_DIR"], "curation.png")
+        imsave(out, viewer.screenshot(canvas_only=False, flash=False), check_contrast=False)
