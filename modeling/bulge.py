@@ -117,7 +117,9 @@ def locking_volume(material, lambda_pre=1.0) -> float:
     if isinstance(material, LinearElastic):
         return math.inf
     ell = float(check_prestretch(lambda_pre, 0.0))
-    return _shooting.locking_volume(material, ell)
+    if not math.isfinite(material.locking_stretch):
+        return math.inf
+    return _lock_volume_cached(material, ell)
 
 
 @functools.lru_cache(maxsize=256)
@@ -139,20 +141,37 @@ def _lock_volumes(material, ell):
 
 
 def _lock_volumes_uncached(material, levels):
-    lam_lock = material.locking_stretch
-    eps1, eps2 = 1e-4, 1e-5
-    m = levels.size
-    res = _shooting.family(
-        material,
-        np.r_[np.full(m, lam_lock * (1 - eps1)), np.full(m, lam_lock * (1 - eps2))],
-        np.r_[levels, levels],
-    )
-    v1, v2 = res["vtilde"][:m], res["vtilde"][m:]
-    return v2 + (v2 - v1) * eps2 / (eps1 - eps2)
+    return _shooting.locking_volumes(material, levels)
 
 
 #: pole-stretch samples of the coarse families, as fractions of the reachable range
 _FAMILY_U = np.unique(np.r_[np.geomspace(1e-9, 0.5, 28), 1.0 - np.geomspace(0.5, 1e-5, 24)])
+
+
+_FAMILY_CACHE: dict = {}
+
+
+def _family_curves(material, levels, top: float):
+    """Coarse exact families ``q -> (ln V, ln P)`` at several rim stretches.
+
+    Memoised per (law, level, top); the levels not yet known are solved in one vectorised call.
+    """
+    keys = [(material, float(lv), top) for lv in levels]
+    todo = [k for k in keys if k not in _FAMILY_CACHE]
+    if todo:
+        lvs = np.array([k[1] for k in todo])
+        lam0 = np.concatenate([lv + _FAMILY_U * (top - lv) for lv in lvs])
+        fam = _shooting.family(material, lam0, np.repeat(lvs, _FAMILY_U.size), steps=80, refine=False)
+        for i, key in enumerate(todo):
+            sl = slice(i * _FAMILY_U.size, (i + 1) * _FAMILY_U.size)
+            v, p, l0 = fam["vtilde"][sl], fam["pressure"][sl], lam0[sl]
+            ok = np.isfinite(v) & (v > 0) & np.isfinite(p)
+            if ok.sum() < 4:
+                raise NoSolutionError(f"the {material.law} law gives no bulge solutions at lambda_pre={key[1]:.6g}")
+            if len(_FAMILY_CACHE) > 2048:
+                _FAMILY_CACHE.clear()
+            _FAMILY_CACHE[key] = (np.log(l0[ok] - key[1]), np.log(v[ok]), np.log(p[ok]))
+    return [_FAMILY_CACHE[k] for k in keys]
 
 
 def _row_curves(material, ell, lam_top):
@@ -160,23 +179,10 @@ def _row_curves(material, ell, lam_top):
     # a varying pre-stretch changes the small-deflection scaling: sample it at up to 9 quantiles
     levels = np.unique(np.round(np.quantile(ell, np.linspace(0.0, 1.0, 9)), 12))
     top = float(np.min(lam_top))
-    lam0 = np.concatenate([lv + _FAMILY_U * (top - lv) for lv in levels])
-    ells = np.repeat(levels, _FAMILY_U.size)
-    fam = _shooting.family(material, lam0, ells, steps=80)
-    qs, lnvs, lnps = [], [], []
-    for i, lv in enumerate(levels):
-        sl = slice(i * _FAMILY_U.size, (i + 1) * _FAMILY_U.size)
-        v, p, l0 = fam["vtilde"][sl], fam["pressure"][sl], lam0[sl]
-        ok = np.isfinite(v) & (v > 0) & np.isfinite(p)
-        if ok.sum() < 4:
-            raise NoSolutionError(f"the {material.law} law gives no bulge solutions at lambda_pre={lv:.6g}")
-        qs.append(np.log(l0[ok] - lv))
-        lnvs.append(np.log(v[ok]))
-        lnps.append(np.log(p[ok]))
-    m = min(len(q) for q in qs)
-    qs, lnvs, lnps = (np.array([a[:m] for a in arrs]) for arrs in (qs, lnvs, lnps))
+    curves = _family_curves(material, levels, top)
+    m = min(c[0].size for c in curves)
+    qs, lnvs, lnps = (np.array([c[i][:m] for c in curves]) for i in range(3))
     if levels.size == 1:
-        w = np.zeros((ell.size, 1))
         idx = np.zeros(ell.size, int)
         pick = lambda arr: arr[idx]  # noqa: E731
     else:
