@@ -47,12 +47,15 @@ _FIGURES = {
 
 # ------------------------------------------------------------------------------------ sources
 class _ArraySource:
-    def __init__(self, frames):
+    """Frames already in memory (used only when :mod:`osmobulge.imaging.io` is unavailable)."""
+
+    def __init__(self, frames, pixel_size, timestamps):
         self.frames = frames
-        self.pixel_size = None
-        self.timestamps = None
-        self.name = "array"
-        self.names = None
+        self.pixel_size = pixel_size
+        self.timestamps = timestamps
+        self.source = "array"
+        self.bad_frames = []
+        self.attrs = {}
 
     def __len__(self):
         return len(self.frames)
@@ -61,48 +64,28 @@ class _ArraySource:
         return np.asarray(self.frames[i])
 
 
-def _open(source):
-    """A lazy frame sequence with optional ``pixel_size`` (m) and ``timestamps`` (s)."""
-    if isinstance(source, str | os.PathLike):
-        path = Path(source)
-        if not path.exists():
-            raise FileNotFoundError(f"source {str(path)!r} does not exist")
-        try:
-            from osmobulge.imaging import io as _io
-        except ImportError as err:  # pragma: no cover - io is written by another helper
-            raise NotImplementedError("reading files needs osmobulge.imaging.io (not available)") from err
-        for name in ("open_series", "read_series"):
-            if hasattr(_io, name):
-                return _Reader(getattr(_io, name)(path), str(path))
-        raise NotImplementedError("osmobulge.imaging.io has no open_series/read_series reader")
-    if isinstance(source, np.ndarray) or hasattr(source, "__array__") or isinstance(source, list | tuple):
-        if isinstance(source, np.ndarray) and source.ndim == 2:
-            source = source[None]
-        shape = np.shape(source[0]) if len(source) else ()
-        if len(shape) != 2:
-            raise ValueError(f"source array must have shape (T, H, W), got frames of shape {shape}")
-        return _ArraySource(source)
-    raise TypeError(f"source must be a path or an array of shape (T, H, W), got {type(source).__name__}")
-
-
-class _Reader:
-    """Adapter over an :mod:`osmobulge.imaging.io` series object."""
-
-    def __init__(self, series, name):
-        self.series = series
-        self.name = name
-        self.pixel_size = getattr(series, "pixel_size", None)
-        ts = getattr(series, "timestamps", None)
-        if ts is None:
-            ts = getattr(series, "times", None)
-        self.timestamps = None if ts is None else np.asarray(ts, float)
-        self.names = getattr(series, "names", None) or getattr(series, "filenames", None)
-
-    def __len__(self):
-        return len(self.series)
-
-    def __getitem__(self, i):
-        return np.asarray(self.series[i])
+def _open(source, pixel_size, frame_interval):
+    """Open the series lazily: :func:`osmobulge.imaging.io.open_series` checks pixel size and times."""
+    if pixel_size is not None and not (np.isfinite(pixel_size) and 1e-9 <= float(pixel_size) <= 1e-3):
+        raise ValueError(f"pixel_size must be in [1e-9, 1e-3] m/px, got {pixel_size!r}")
+    if frame_interval is not None and not (np.isfinite(frame_interval) and frame_interval > 0):
+        raise ValueError(f"frame_interval must be > 0 s, got {frame_interval!r}")
+    try:
+        from osmobulge.imaging.io import open_series
+    except ImportError:  # pragma: no cover - the readers are another module's
+        open_series = None
+    if open_series is not None:
+        return open_series(source, pixel_size=pixel_size, frame_interval=frame_interval)
+    if isinstance(source, str | os.PathLike):  # pragma: no cover
+        raise NotImplementedError("reading files needs osmobulge.imaging.io")
+    arr = np.asarray(source)
+    if arr.ndim != 3:
+        raise ValueError(f"source array must have shape (T, H, W), got {arr.shape}")
+    if pixel_size is None:
+        raise ValueError("pixel size unknown: the frames carry none, pass pixel_size= (m/px)")
+    if frame_interval is None:
+        raise ValueError("frame times unknown: the frames carry none, pass frame_interval= (s)")
+    return _ArraySource(arr, float(pixel_size), np.arange(len(arr)) * float(frame_interval))
 
 
 def _chamber_attrs(chamber):
@@ -251,35 +234,14 @@ def extract(
     settings = settings or TraceSettings()
     if not isinstance(settings, TraceSettings):
         raise TypeError(f"settings must be a TraceSettings, got {type(settings).__name__}")
-    src = _open(source)
+    src = _open(source, pixel_size, frame_interval)
     n = len(src)
     if n == 0:
         raise ValueError("source holds no frames")
-    # -- pixel size and times -----------------------------------------------------------
-    p = pixel_size
-    if p is not None and not (np.isfinite(p) and 1e-9 <= float(p) <= 1e-3):
-        raise ValueError(f"pixel_size must be in [1e-9, 1e-3] m/px, got {pixel_size!r}")
-    if src.pixel_size is not None:
-        if p is not None and not np.isclose(float(p), float(src.pixel_size), rtol=1e-3):
-            raise ValueError(f"pixel_size={p!r} m conflicts with the file's {src.pixel_size!r} m: "
-                             "drop the argument or fix the metadata")
-        p = float(src.pixel_size) if p is None else float(p)
-    if p is None:
-        raise ValueError("pixel size unknown: the source carries none, pass pixel_size= (m/px)")
-    p = float(p)
-    if src.timestamps is not None and len(src.timestamps) == n and np.all(np.isfinite(src.timestamps)):
-        times = np.asarray(src.timestamps, float)
-        if frame_interval is not None:
-            dt_file = float(np.median(np.diff(times))) if n > 1 else float(frame_interval)
-            if not np.isclose(dt_file, float(frame_interval), rtol=0.01):
-                raise ValueError(f"frame_interval={frame_interval!r} s conflicts with the file's timestamps "
-                                 f"(median interval {dt_file:.6g} s): drop the argument or fix the metadata")
-    elif frame_interval is not None:
-        if not (np.isfinite(frame_interval) and frame_interval > 0):
-            raise ValueError(f"frame_interval must be > 0 s, got {frame_interval!r}")
-        times = np.arange(n) * float(frame_interval)
-    else:
-        raise ValueError("frame times unknown: the source carries no timestamps, pass frame_interval= (s)")
+    p = float(src.pixel_size)
+    times = np.asarray(src.timestamps, float)
+    if not (np.isfinite(p) and p > 0) or times.shape != (n,) or not np.all(np.isfinite(times)):
+        raise ValueError("pixel size or frame times unknown: pass pixel_size= (m/px) and frame_interval= (s)")
     chamber_attrs = _chamber_attrs(chamber)
     priors_px = {int(k): _points_px(v, p, "priors") for k, v in (priors or {}).items()}
     manual_px = {int(k): _points_px(v, p, "manual_profiles") for k, v in (manual_profiles or {}).items()}
@@ -505,7 +467,8 @@ def _dataset(times, p, chamber_attrs, tracer, scal, flag, flag_figure, source_ki
         "title": "bulge profiles extracted from a micrograph series",
         "software": "osmobulge",
         "osmobulge_version": __version__,
-        "source": str(src.name),
+        "source": str(getattr(src, "source", "array")),
+        "bad_frames": "; ".join(f"{a}: {b}" for a, b in getattr(src, "bad_frames", [])) or "none",
         "pixel_size": p,
         "frame_interval": float(np.median(np.diff(times))) if n > 1 else 0.0,
         "bulge_direction": tracer.bulge_direction,

@@ -89,6 +89,9 @@ class TraceSettings:
         Left/right volume disagreement that flags ``poor_fit``.
     max_drift : float
         Largest frame-to-frame drift searched by the phase correlation.
+    well_membrane_flag : float
+        Fraction of the well's interior with membrane contrast above which a frame
+        without a dome is ``fractured`` (torn flaps in the well) rather than ``no_membrane``.
     """
 
     search: float = 20.0
@@ -99,10 +102,11 @@ class TraceSettings:
     min_contrast: float = 0.25
     gap_flag: float = 1.5
     delamination_flag: float = 0.5
-    touching_flag: float = 1.5
+    touching_flag: float = 2.5
     residual_flag: float = 1.0
     asymmetry_flag: float = 0.08
     max_drift: float = 40.0
+    well_membrane_flag: float = 0.01
 
     def to_attrs(self) -> dict:
         return {f"trace_{k}": float(v) for k, v in self.__dict__.items()}
@@ -443,7 +447,10 @@ class ChamberTracer:
                 search = np.round((0.5 * wi + 2.0 + 1.5 * self.blur) / sstep).astype(int)
         mid, lo, hi, con, width = band_edges(prof, offs, g.polarity, centre=centre, search=search,
                                              side=max(2, int(1.5 / sstep)))
-        return {"mid": mid, "lo": lo, "hi": hi, "contrast": con, "width": width, "stations": s,
+        # noise of a single sample, from differences at the window ends (away from the band)
+        ends = np.c_[prof[:, :4], prof[:, -4:]]
+        noise = 1.4826 * float(np.median(np.abs(np.diff(ends, axis=1)))) / np.sqrt(2.0)
+        return {"mid": mid, "lo": lo, "hi": hi, "contrast": con, "width": width, "stations": s, "noise": noise,
                 "station_pts": pts, "normals": nrm, "half": w}
 
     def _exclusion(self, g, u, z):
@@ -670,18 +677,34 @@ class ChamberTracer:
         dome = ~excl
         ref = tr["ref_contrast"]
         fig["dome_contrast"] = float(_nanmedian(con[dome]) / ref) if dome.any() and ref > 0 else 0.0
-        fig["gap_length"] = float(_longest_run((~good)[dome], ds[dome]) / max(g.thickness, 1.0))
-        # rim contact: membrane on the flat line just outside each rim
+        # gaps: stations whose band contrast drops well below the dome's own (a running median along
+        # the curve: the thin pole is fainter than the rims) and into the noise
+        cd = np.nan_to_num(con[dome], nan=0.0)
+        if cd.size:
+            win = min(151, 2 * (cd.size // 2) + 1)
+            local = np.maximum(ndi.percentile_filter(cd, 80, size=win, mode="nearest"), 0.5 * float(np.median(cd)))
+            low = cd < np.maximum(0.3 * local, 3.0 * tr.get("noise", 0.0))
+            fig["gap_length"] = float(_longest_run(low, ds[dome]) / max(g.thickness, 1.0))
+        else:
+            fig["gap_length"] = 0.0
+        # rim contact: membrane on the flat line just outside each rim, as a fraction of the
+        # band's contrast against the water on the nearest flat columns (1 = on the surface, 0 = lifted)
         uu = R + np.linspace(0.02, 0.1, 9) * R
+        zw = 0.5 * g.thickness + 3.0 * self.blur + 4.0
         vals = []
         for sgn in (-1.0, 1.0):
             p = g.line.point(sgn * uu, 0.0)
-            band = view.sample(p[:, 0], p[:, 1])
-            pw = g.line.point(sgn * uu, 0.5 * g.thickness + 6.0 + 0.0 * uu)
-            pw2 = g.line.point(sgn * (R + 0.5 * R) + 0.0 * uu, 0.5 * g.thickness + 6.0)
-            water = _nanmedian(np.r_[view.sample(pw2[:, 0], pw2[:, 1])])
-            del pw
-            vals.append(float(g.polarity * (water - _nanmedian(band)) / max(abs(g.contrast), 1e-9)))
+            band = _nanmedian(view.sample(p[:, 0], p[:, 1]))
+            side = self._flat_u[np.sign(self._flat_u) == sgn]
+            if side.size < 5:  # no flat surface on this side in the field: use the other side's
+                side = self._flat_u
+            far = side[np.argsort(np.abs(side))[:15]]
+            pf = g.line.point(far, 0.0)
+            pw = g.line.point(far, zw)
+            band_far = _nanmedian(view.sample(pf[:, 0], pf[:, 1]))
+            water = _nanmedian(view.sample(pw[:, 0], pw[:, 1]))
+            den = water - band_far
+            vals.append(float((water - band) / den) if np.isfinite(den) and abs(den) > 0 else np.nan)
         fig["rim_contact"] = float(min(vals))
         # sustained gap to another membrane beyond the band, both sides of the dome
         fig["neighbour_gap"] = self._neighbour_gap(view, g, tr)
@@ -699,7 +722,7 @@ class ChamberTracer:
         """
         from scipy.spatial import cKDTree
 
-        f = 3
+        f = 2
 
         u, z = tr["u"], tr["z"]
         pts = g.line.point(u, z)
@@ -750,6 +773,21 @@ class ChamberTracer:
             return np.inf
         # 0 when a foreign membrane reaches the edge of the dome's own band
         return float(max(np.min(dist[sel] - excl_r[sel]), 0.0))
+
+    def _well_membrane(self, view, g):
+        """Fraction of the well's interior showing membrane contrast (torn flaps hanging into it)."""
+        R = g.rim_radius
+        depth = g.well.depth if np.isfinite(g.well.depth) else 4.0 * g.thickness
+        top = -0.5 * g.thickness
+        uu = np.arange(-0.9 * R, 0.9 * R, 2.0)
+        zz = np.arange(top - 3.0 * self.blur - 2.0, top - depth + 3.0 * self.blur + 2.0, -2.0)
+        if uu.size == 0 or zz.size == 0:
+            return 0.0
+        pts = g.line.point(uu[None, :], zz[:, None])
+        vals = view.sample(pts[..., 0], pts[..., 1])
+        liquid = _nanmedian(vals)
+        q = g.polarity * (liquid - vals) / max(abs(g.contrast), 1e-9)
+        return float(np.mean(q > 0.5))
 
     def _flag(self, fig):
         st = self.settings
@@ -809,8 +847,12 @@ class ChamberTracer:
         tr = self.trace_dome(view, g, guide_uz)
         if tr is None:
             out.message = "no dome traced"
-            out.figures = {"dome_contrast": 0.0}
-            out.flag, out.flag_figure, out.flag_value = "no_membrane", "dome_contrast", 0.0
+            out.figures = {"dome_contrast": 0.0, "well_membrane": self._well_membrane(view, g)}
+            if out.figures["well_membrane"] > self.settings.well_membrane_flag:
+                out.flag, out.flag_figure = "fractured", "well_membrane"
+                out.flag_value = out.figures["well_membrane"]
+            else:
+                out.flag, out.flag_figure, out.flag_value = "no_membrane", "dome_contrast", 0.0
             return out
         out.u, out.z = tr["u"], tr["z"]
         out.points_u, out.points_z = tr["points_u"], tr["points_z"]
