@@ -148,6 +148,7 @@ class CurationSession:
         self.times = self._frame_times(file_times)
         self.chamber = int(chamber)
         self.up = BULGE_DIRECTIONS.get(im.bulge_direction, BULGE_DIRECTIONS["up"])
+        self.listeners: list[Callable[[str, int | None], None]] = []
         self.curation = cur_api.load_curation(self.folder)
         self.extraction = None
         self.reload_extraction()
@@ -156,7 +157,6 @@ class CurationSession:
         self._accepted: dict[int, ProfileFit] = {}
         for f, v in self.curation.manual_profiles.items():
             self.picks[int(f)] = points_m_to_rc(v["points"], self.pixel_size)
-        self.listeners: list[Callable[[str, int | None], None]] = []
 
     # ------------------------------------------------------------------ basics
     def _frame_times(self, file_times) -> np.ndarray:
@@ -249,20 +249,40 @@ class CurationSession:
         return None
 
     def geometry(self, frame: int) -> ChamberGeometry | None:
-        """The chamber frame the extraction measured in a frame (None if unknown)."""
+        """The chamber frame the extraction measured in a frame (None if unknown).
+
+        The axis point is the extraction's ``axis_col``/``axis_row``; the directions
+        of the flat membrane line and of the bulge come from the stored profile,
+        which the extraction gives both in chamber coordinates (``profile_x``,
+        ``profile_z``) and in pixels (``profile_col``, ``profile_row``): a least-squares
+        fit of that rigid map, valid for any bulge direction and tilt.
+        """
         sub = self._ds_frame(self.check_frame(frame))
         if sub is None or not {"axis_col", "axis_row"} <= set(sub.variables):
             return None
         ax, ay = float(sub["axis_col"].values), float(sub["axis_row"].values)
         if not (np.isfinite(ax) and np.isfinite(ay)):
             return None
+        if {"profile_x", "profile_z", "profile_col", "profile_row"} <= set(sub.variables):
+            x = np.asarray(sub["profile_x"].values, float) / self.pixel_size
+            z = np.asarray(sub["profile_z"].values, float) / self.pixel_size
+            col = np.asarray(sub["profile_col"].values, float)
+            row = np.asarray(sub["profile_row"].values, float)
+            ok = np.isfinite(x) & np.isfinite(z) & np.isfinite(col) & np.isfinite(row)
+            if ok.sum() >= 3 and np.ptp(z[ok]) > 1.0 and np.ptp(x[ok]) > 1.0:
+                design = np.column_stack([np.ones(ok.sum()), x[ok], z[ok]])
+                coef, *_ = np.linalg.lstsq(design, np.column_stack([col[ok], row[ok]]), rcond=None)
+                ex, ez = coef[1], coef[2]  # (dcol, drow) per unit x and per unit z
+                up = tuple(float(v) for v in ez / np.linalg.norm(ez))
+                return ChamberGeometry(axis_point=(ax, ay), angle=float(np.arctan2(ex[1], ex[0])), up=up,
+                                       source="extraction")
+        # no profile in this frame: the tilt of an upright view, in the stored frame
+        up = BULGE_DIRECTIONS.get(str(self.extraction.attrs.get("bulge_direction", "")), self.up)
         tilt = float(sub["tilt"].values) if "tilt" in sub else 0.0
-        tilt = np.deg2rad(tilt) if sub.get("tilt") is not None and sub["tilt"].attrs.get("units") == "deg" else tilt
-        up = self.up
-        if "bulge_direction" in self.extraction.attrs:
-            up = BULGE_DIRECTIONS.get(str(self.extraction.attrs["bulge_direction"]), up)
-        return ChamberGeometry(axis_point=(ax, ay), angle=tilt if np.isfinite(tilt) else 0.0, up=up,
-                               source="extraction")
+        theta = -np.deg2rad(tilt) if np.isfinite(tilt) else 0.0
+        # rotate the view's line direction (cos, sin) by the quarter turns that make `up` upright
+        base = np.arctan2(-up[0], up[1]) + np.pi  # angle of the line direction for this `up`, untilted
+        return ChamberGeometry(axis_point=(ax, ay), angle=float(base + theta), up=up, source="extraction")
 
     # ------------------------------------------------------------------ picking
     def set_picks(self, frame: int, points_rc, *, snap: bool = True, search: float = 6.0) -> ProfileFit:

@@ -26,7 +26,7 @@ membrane_thickness_um = {l0:g}
 concentration_M = 3.0
 
 [imaging]
-frames = "frames/*.tif"
+frames = "frames"
 pixel_size_um = {p:g}
 frame_interval_min = {dt:g}
 bulge_direction = "up"
