@@ -10,6 +10,7 @@ Cases
 -----
 * ``bulge_mechanics`` over ``linspace(0.005, 7, 200)`` from scratch (in-process
   caches cleared before each run);
+* the same with the in-process memos (locking volumes, guess families) kept warm;
 * ``mechanics_table(PDMS, vtilde_max=7, n=200, cache=False)`` from scratch
   (the table's own Chebyshev grid plus the locking volume and the splines);
 * ``mechanics_table(PDMS, vtilde_max=7, n=200)`` loaded from a warm on-disk
@@ -48,6 +49,7 @@ import numpy as np  # noqa: E402
 
 import osmobulge.modeling._shooting as shooting  # noqa: E402
 import osmobulge.modeling.bulge as bulge  # noqa: E402
+import osmobulge.modeling.table as table  # noqa: E402
 from osmobulge.modeling import bulge_mechanics, mechanics_table  # noqa: E402
 from osmobulge.modeling.materials import PDMS  # noqa: E402
 
@@ -87,13 +89,34 @@ class ShootCounter:
         return False
 
 
-def clear_memo() -> None:
-    """Forget every in-process memo so that a run really starts from scratch."""
-    bulge._lock_volume_cached.cache_clear()
+MEMO_MODULES = (bulge, shooting, table)
+
+
+def clear_memo() -> int:
+    """Forget every in-process memo so that a run really starts from scratch.
+
+    Clears every ``functools.lru_cache`` function and every module-level ``*_CACHE``
+    dict of the solver modules; returns how many were cleared (reported, so that a
+    new memo added to the solver cannot silently make "scratch" warm).
+    """
+    n = 0
+    for module in MEMO_MODULES:
+        for name, obj in vars(module).items():
+            if callable(getattr(obj, "cache_clear", None)):
+                obj.cache_clear()
+                n += 1
+            elif name.endswith("_CACHE") and isinstance(obj, dict):
+                obj.clear()
+                n += 1
+    return n
 
 
 def build_mechanics():
     clear_memo()
+    return bulge_mechanics(PDMS, VTILDE)
+
+
+def build_mechanics_warm():
     return bulge_mechanics(PDMS, VTILDE)
 
 
@@ -135,6 +158,7 @@ def main(argv=None) -> None:
         mechanics_table(PDMS, vtilde_max=7.0, n=200)
         cases = [
             ("bulge_mechanics(PDMS, linspace(0.005, 7, 200)), scratch", build_mechanics, TARGET_SCRATCH_S),
+            ("bulge_mechanics(...), same, in-process memos warm", build_mechanics_warm, TARGET_SCRATCH_S),
             ("mechanics_table(PDMS, vtilde_max=7, n=200, cache=False)", build_table_scratch, TARGET_SCRATCH_S),
             ("mechanics_table(PDMS, vtilde_max=7, n=200), disk cache", load_table_cached, TARGET_CACHE_S),
         ]
@@ -146,7 +170,8 @@ def main(argv=None) -> None:
     load_after = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
     rss_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024 if resource else float("nan")
     print(f"osmobulge mechanics benchmark: {platform.python_implementation()} {platform.python_version()}, "
-          f"numpy {np.__version__}, {platform.machine()}; {pinning}; BLAS/OMP threads = 1")
+          f"numpy {np.__version__}, {platform.machine()}; {pinning}; BLAS/OMP threads = 1; "
+          f"scratch runs clear {clear_memo()} in-process memos")
     print(f"1-min load average before/after: {load_before:.2f}/{load_after:.2f} (2 cores shared); "
           f"median of {args.repeat} runs; process peak RSS {rss_mb:.0f} MB (interpreter + imports)")
     header = (f"{'case':<58} {'median':>10} {'min':>10} {'max':>10} {'target':>8} {'ratio':>6} "
