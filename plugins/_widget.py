@@ -443,9 +443,9 @@ class ProfilePicker(Container):
             self._info.value = f"{n} points" + (f" ({fit.message})" if fit.message and n else "")
 
     # ------------------------------------------------------------------ actions
-    def _guard(self, func, *args):
+    def _guard(self, func, *args, **kwargs):
         try:
-            out = func(*args)
+            out = func(*args, **kwargs)
         except Exception as err:
             self._message.value = f"error: {err}"
             raise
@@ -482,8 +482,8 @@ class ProfilePicker(Container):
         self._message.value = "extraction updated"
 
     def import_points(self, path):
-        """Load points from a CSV or ImageJ ROI file (snapped if the box is ticked)."""
-        frames = self._guard(self.session.import_points, path, snap=bool(self._snap.value))
+        """Load points from a CSV or ImageJ ROI file, as they are (not snapped)."""
+        frames = self._guard(self.session.import_points, path, snap=False)
         from osmobulge.plugins._logic import picks_to_layer_data
 
         self._updating = True

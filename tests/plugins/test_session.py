@@ -126,3 +126,29 @@ def test_points_export_import_round_trip(experiment, tmp_path):
         for f in (2, 4):
             np.testing.assert_allclose(s2.picks[f], s.picks[f], atol=1e-4)
             assert s2.fit(f).volume == pytest.approx(s.fit(f).volume, rel=1e-5)
+
+
+@pytest.mark.slow
+def test_semi_automatic_tracing_uses_the_picks_as_priors(experiment):
+    from osmobulge.experiments.runs import run_experiment
+
+    folder, truth = experiment
+    run_experiment(folder, ["process"], errors="raise")
+    on_disk = (folder / "results" / "extraction.nc").read_bytes()
+    s = CurationSession(folder)
+    s.set_picks(1, clicks(truth, 1, seed=4))
+    s.set_picks(4, clicks(truth, 4, seed=5))
+    seen = []
+    s.listeners.append(lambda what, frame: seen.append(what))
+    ds = s.trace_with_priors()
+    assert list(np.atleast_1d(ds.attrs["prior_frames"])) == [1, 4]
+    assert "extraction" in seen and s.extraction is ds
+    assert (folder / "results" / "extraction.nc").read_bytes() == on_disk  # a preview: results untouched
+    # the frames between and around the picks are traced onto the membrane (sub-pixel)
+    for f in (1, 2, 3, 4, 5):
+        prof = s.auto_profile_rc(f)
+        mid = truth_midline_rc(truth, f)
+        d = np.min(np.hypot(prof[:, None, 0] - mid[None, :, 0], prof[:, None, 1] - mid[None, :, 1]), axis=1)
+        assert np.sqrt(np.mean(d**2)) < 0.5, (f, np.sqrt(np.mean(d**2)))
+    with pytest.raises(ValueError, match="at least one frame"):
+        CurationSession(folder).trace_with_priors()

@@ -197,3 +197,43 @@ def test_screenshot_overlay_is_on_the_profile(make_napari_viewer, experiment, tm
         pp.points_layer.visible = True
         out = os.path.join(os.environ["OSMOBULGE_SCREENSHOT_DIR"], "curation.png")
         imsave(out, viewer.screenshot(canvas_only=False, flash=False), check_contrast=False)
+
+
+def test_regions_import_export_and_plot(make_napari_viewer, experiment, tmp_path):
+    from osmobulge.plugins._widget import REGIONS_LAYER, CurationWidget, ProfilePicker
+
+    folder, truth = experiment
+    viewer = make_napari_viewer()
+    _open(viewer, folder)
+    cw, pp = CurationWidget(viewer), ProfilePicker(viewer)
+    # chamber regions: the button asks for rectangles, then saves them
+    cw._regions.clicked.emit()
+    layer = viewer.layers[REGIONS_LAYER]
+    assert layer.mode == "add_rectangle" and "draw one rectangle" in cw._message.value
+    layer.add_rectangles([np.array([[-0.5, -0.5], [199.5, 119.5]]), np.array([[-0.5, 119.5], [199.5, 239.5]])])
+    cw._regions.clicked.emit()
+    assert [dict(r) for r in load_curation(folder).chamber_regions] == [
+        {"name": "chamber0", "rows": [0, 200], "cols": [0, 120]},
+        {"name": "chamber1", "rows": [0, 200], "cols": [120, 240]},
+    ]
+    # points exported from one viewer, imported into another session's picker
+    viewer.dims.set_current_step(0, 2)
+    pp.set_points(_clicks(truth, 2))
+    pp._file.value = tmp_path / "picked.zip"
+    pp._export.clicked.emit()
+    assert (tmp_path / "picked.zip").is_file()
+    viewer2 = make_napari_viewer()
+    _open(viewer2, folder)
+    pp2 = ProfilePicker(viewer2)
+    pp2._file.value = tmp_path / "picked.zip"
+    pp2._import.clicked.emit()
+    np.testing.assert_allclose(pp2.session.picks[2], pp.session.picks[2], atol=1e-3)
+    rows = np.asarray(pp2.points_layer.data)
+    assert np.all(np.rint(rows[:, 0]) == 2) and len(rows) == len(pp.session.picks[2])
+    # the plot follows the decisions: an exclusion appears as a red cross
+    viewer.dims.set_current_step(0, 4)
+    cw._exclude.clicked.emit()
+    labels = [ln.get_label() for ln in cw.ax.get_lines()]
+    assert "excluded" in labels
+    (xline,) = [ln for ln in cw.ax.get_lines() if ln.get_label() == "excluded"]
+    np.testing.assert_allclose(xline.get_xdata(), [cw.session.times[4] / 60.0])
