@@ -430,16 +430,19 @@ def measure_line(view, line, u, *, polarity, thickness, window):
     return new, float(np.median(width[inl])), float(np.median(con[inl])), rms, inl
 
 
-def measure_walls(view, line, well, *, thickness, window, n_rows=12):
+def measure_walls(view, line, well, *, thickness, window, n_rows=None):
     """Sub-pixel wall lines of a well; returns the refined :class:`Well` and the wall RMS (px).
 
-    The walls are measured on rows between 15 % and 75 % of the well depth
-    below the base's top surface (``z = -thickness / 2``) and extrapolated to
-    that surface: the wall tops are the rim.
+    The walls are measured on rows (one per pixel by default) between 12 % and
+    80 % of the well depth below the base's top surface (``z = -thickness / 2``),
+    fitted with clipped least squares (dust on a wall only removes rows), and
+    extrapolated to that surface: the wall tops are the rim.
     """
     top = -0.5 * thickness
     depth = well.depth if np.isfinite(well.depth) else 4.0 * thickness
-    zs = top - np.linspace(0.15, 0.75, n_rows) * depth
+    if n_rows is None:
+        n_rows = int(np.clip(0.68 * depth, 8, 200))
+    zs = top - np.linspace(0.12, 0.8, n_rows) * depth
     out = {}
     rms_all = []
     for name, u0, slope in (("left", well.u_left, well.slope_left), ("right", well.u_right, well.slope_right)):
@@ -449,7 +452,7 @@ def measure_walls(view, line, well, *, thickness, window, n_rows=12):
         prof = view.sample(pts[..., 0], pts[..., 1])
         pos, step = step_crossing(prof, offs)
         ucross = uc + pos
-        a, b, rms, ok = _robust_line(zs - top, ucross)
+        a, b, rms, ok = _robust_line(zs - top, ucross, clip=2.5)
         if not np.isfinite(a) or ok.sum() < 3:
             return None, np.nan
         out[name] = (a, b)

@@ -461,7 +461,8 @@ def _dataset(times, p, chamber_attrs, tracer, scal, flag, flag_figure, source_ki
     coords = {
         "time": ("time", np.asarray(times, float), {"units": "s", "long_name": "time since the first frame"}),
         "frame": ("time", np.arange(n), {"long_name": "frame index"}),
-        "s": ("s", np.linspace(0.0, 1.0, n_profile), {"units": "1", "long_name": "arc length from the left rim / length"}),
+        "s": ("s", np.linspace(0.0, 1.0, n_profile),
+              {"units": "1", "long_name": "arc length from the left rim / length"}),
     }
     attrs = {
         "title": "bulge profiles extracted from a micrograph series",

@@ -74,7 +74,8 @@ class TraceSettings:
         Expected scatter of the traced points (sets the spline smoothing).
     min_contrast : float
         Band contrast, as a fraction of the flat band's, below which a station
-        counts as "no membrane" (gaps, fracture).
+        is not used (nor above 4 noise sigmas) and below which the dome's median
+        contrast means ``no_membrane``.
     gap_flag : float
         Longest run without membrane, in band thicknesses, that flags ``fractured``.
     delamination_flag : float
@@ -99,7 +100,7 @@ class TraceSettings:
     station_step: float = 1.0
     sample_step: float = 0.5
     smoothing: float = 0.35
-    min_contrast: float = 0.25
+    min_contrast: float = 0.08
     gap_flag: float = 1.5
     delamination_flag: float = 0.5
     touching_flag: float = 2.5
@@ -378,7 +379,10 @@ class ChamberTracer:
         coarse = patch[:hh, :ww].reshape(hh // f, f, ww // f, f).mean(axis=(1, 3))
         bg = ndi.gaussian_filter(coarse, 8.0, mode="nearest")
         con = g.polarity * (bg - coarse) / np.maximum(np.abs(bg), 1e-9)
-        ref = abs(g.contrast) / max(np.median(np.abs(bg)), 1e-9) if np.isfinite(g.contrast) else np.percentile(con, 99.5)
+        if np.isfinite(g.contrast):
+            ref = abs(g.contrast) / max(np.median(np.abs(bg)), 1e-9)
+        else:
+            ref = np.percentile(con, 99.5)
         c = np.clip(con / max(ref, 1e-9), 0.0, 1.0)
         cost = 1.0 / (0.04 + c) ** 2
         # coarse pixel centres in view coordinates -> chamber (u, z)
@@ -512,7 +516,8 @@ class ChamberTracer:
         pts = r["station_pts"] + np.nan_to_num(mid)[:, None] * r["normals"]
         pu, pz = g.line.coords(pts)
         finite = np.isfinite(mid)
-        good = finite & (r["contrast"] > st.min_contrast * ref_con)
+        # a station sees the membrane when its band stands out of the flat band's scale and the noise
+        good = finite & (r["contrast"] > max(st.min_contrast * ref_con, 4.0 * r.get("noise", 0.0)))
         excl = self._exclusion(g, pu, pz) | self._exclusion(g, *g.line.coords(r["station_pts"]))
         use = good & ~excl
         # outliers: far from a running median of the offsets along the curve
@@ -669,10 +674,9 @@ class ChamberTracer:
 
     # ---------------------------------------------------------------------- quality figures
     def _figures(self, view, g, tr):
-        st = self.settings
         R = g.rim_radius
         fig = {}
-        con, good, excl = tr["contrast"], tr["good"], tr["excluded"]
+        con, excl = tr["contrast"], tr["excluded"]
         ds = np.r_[0.0, np.diff(tr["stations"])]
         dome = ~excl
         ref = tr["ref_contrast"]
