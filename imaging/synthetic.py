@@ -32,7 +32,7 @@ Default field
 -------------
 ``pixel_size = 1 um`` and ``shape = (1024, 1024)``: a 1.024 mm square field.
 The reference chamber of the paper (``a = 200 um``, ``h = 110 um``,
-``l0 = 20 um``) stands on a rim line 854 px from the top, with 64 um of base
+``l0 = 20 um``) has its rim line (flat membrane midline) at row 840, with 64 um of base
 under the well, so a PDMS dome up to the locking volume (:math:`\tilde V = 7.2`,
 height 2.7 a = 538 um, overhang half-width 1.9 a = 382 um) fits with room for
 drift, and the thinnest pole at :math:`\tilde V = 6` is 1.5 px thick.
@@ -568,16 +568,22 @@ def _finish(img, nuis: Nuisances, illum, dust, rng):
         img *= dust
     if illum is not None:
         img *= illum
-    if nuis.poisson_photons > 0:
-        lam = np.clip(img, 0.0, None) * np.float32(nuis.poisson_photons)
-        if nuis.poisson_photons >= _POISSON_NORMAL:
-            # normal approximation of the shot noise (same mean and variance; 5x faster)
-            lam += np.sqrt(lam) * rng.standard_normal(img.shape, dtype=np.float32)
-            img = lam / np.float32(nuis.poisson_photons)
-        else:
-            img = (rng.poisson(lam) / nuis.poisson_photons).astype(np.float32)
-    if nuis.noise_sigma > 0:
-        img += np.float32(nuis.noise_sigma) * rng.standard_normal(img.shape, dtype=np.float32)
+    photons, sigma = float(nuis.poisson_photons), float(nuis.noise_sigma)
+    if 0 < photons < _POISSON_NORMAL:  # few photons: exact Poisson counts
+        img = (rng.poisson(np.clip(img, 0.0, None) * photons) / photons).astype(np.float32)
+    var = None
+    if photons >= _POISSON_NORMAL:
+        # many photons: normal approximation of the shot noise (same mean and variance),
+        # drawn together with the read noise in one pass
+        var = np.clip(img, 0.0, None) * np.float32(1.0 / photons)
+        if sigma > 0:
+            var += np.float32(sigma * sigma)
+    elif sigma > 0:
+        var = np.float32(sigma * sigma)
+    if var is not None:
+        noise = rng.standard_normal(img.shape, dtype=np.float32)
+        noise *= np.sqrt(var)
+        img += noise
     full = float(2**nuis.bit_depth - 1)
     dtype = np.uint8 if nuis.bit_depth == 8 else np.uint16
     out = np.rint(np.clip(img, 0.0, 1.0) * np.float32(full))
@@ -870,6 +876,8 @@ def render_series(
         nb_v,
     )
     truth.attrs["dust_specks"] = specks.ravel() if specks.size else "none"
+    if hasattr(chamber, "to_attrs"):  # a modeling Chamber: its loading too (Chamber.from_attrs round-trips)
+        truth.attrs.update({k: float(v) for k, v in chamber.to_attrs().items()})
     return SyntheticSeries(frames=frames, truth=truth)
 
 
@@ -989,10 +997,14 @@ def _truth(
         attrs[f"scene_{k}"] = "auto" if val is None else (np.asarray(val, float) if isinstance(val, tuple) else val)
     attrs.update(nuis.to_attrs())
     ds = xr.Dataset(data, coords=coords, attrs=attrs)
-    top = np.nanmin(mid_row) if scene.bulge_direction == "up" else None
-    if top is not None and top < 0:
+    rows, cols = sc.shape
+    outside = (mid_col < 0) | (mid_col > cols - 1) | (mid_row < 0) | (mid_row > rows - 1)
+    if np.any(outside):
+        i = int(np.nonzero(outside.any(axis=(1, 2)))[0][0])
         warnings.warn(
-            f"the dome leaves the field (top row {top:.1f} < 0): enlarge shape or pixel_size", UserWarning, stacklevel=3
+            f"the dome leaves the field from frame {i} on (shape {sc.shape}): enlarge shape or pixel_size",
+            UserWarning,
+            stacklevel=3,
         )
     return ds
 
@@ -1009,20 +1021,33 @@ def render_frame(vtilde, **kwargs) -> np.ndarray:
 
 
 def render_simulation(result, **kwargs) -> SyntheticSeries:
-    """Render the series of a simulated actuation (e.g. ``osmobulge.modeling.simulate``).
+    """Render the series of a simulated actuation (:func:`osmobulge.modeling.simulate`).
 
     Parameters
     ----------
     result : xarray.Dataset
-        Holds ``time`` (s) and either ``vtilde`` or ``volume_ratio`` (V/V0;
-        then ``chamber=`` must be given or the attrs must hold
-        ``chamber_radius`` and ``chamber_depth``).
+        Output of ``simulate``: ``time`` (s) and ``vtilde`` (or ``volume_ratio``,
+        V/V0, with the chamber given or in the attrs ``chamber_radius``,
+        ``chamber_depth``).  The chamber attrs written by ``simulate``
+        (``chamber_radius``, ``chamber_depth``, ``membrane_thickness``,
+        ``concentration``, ...) become the render's chamber and are copied
+        into the truth attrs, so ``Chamber.from_attrs(series.truth.attrs)``
+        recovers the chamber.
     **kwargs
-        Passed to :func:`render_series` (``chamber``, ``material``, ...).
+        Passed to :func:`render_series` (``material``, ``lambda_pre``,
+        ``nuisances``, ...); give the same ``material`` and ``lambda_pre`` as
+        the simulation.
 
     Returns
     -------
     SyntheticSeries
+
+    Examples
+    --------
+    >>> from osmobulge.modeling import simulate, paper_chamber
+    >>> from osmobulge.modeling.materials import PDMS
+    >>> sim = simulate(paper_chamber(), PDMS, 2e-12, [0.0, 3600.0, 7200.0])  # doctest: +SKIP
+    >>> series = render_simulation(sim, material=PDMS)  # doctest: +SKIP
     """
     if "time" not in result.coords and "time" not in result:
         raise ValueError("result must have a 'time' coordinate (s)")
@@ -1044,4 +1069,8 @@ def render_simulation(result, **kwargs) -> SyntheticSeries:
         kwargs["chamber"] = tuple(
             float(result.attrs[k]) for k in ("chamber_radius", "chamber_depth", "membrane_thickness")
         )
-    return render_series(np.clip(v, 0.0, None), times=times, **kwargs)
+    out = render_series(np.clip(v, 0.0, None), times=times, **kwargs)
+    for k in ("concentration", "feed_concentration", "temperature", "vant_hoff"):
+        if k in result.attrs and k not in out.truth.attrs:
+            out.truth.attrs[k] = float(result.attrs[k])
+    return out

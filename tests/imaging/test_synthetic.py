@@ -436,6 +436,19 @@ def test_render_simulation_from_volume_ratio():
     assert s.truth.attrs["frame_interval"] == 900.0
 
 
+def test_render_simulation_of_the_transport_model():
+    from osmobulge.modeling import Chamber, simulate
+
+    ch = Chamber(radius=100e-6, depth=50e-6, thickness=10e-6, concentration=3000.0)
+    sim = simulate(ch, PDMS, 2e-12, [0.0, 1800.0, 3600.0])
+    s = render_simulation(sim, material=PDMS, shape=(400, 420))
+    np.testing.assert_allclose(s.truth.vtilde.values, sim.vtilde.values, rtol=1e-12)
+    np.testing.assert_allclose(s.truth.volume_ratio.values, sim.volume_ratio.values, rtol=1e-9)
+    np.testing.assert_allclose(s.truth.area_ratio.values[1:], sim.area_ratio.values[1:], rtol=1e-3)
+    assert Chamber.from_attrs(s.truth.attrs) == ch
+    assert s.frames.shape == (3, 400, 420)
+
+
 @pytest.mark.parametrize(
     "kwargs,match",
     [
