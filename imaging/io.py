@@ -106,7 +106,10 @@ _TIME_UNITS = {"s": 1.0, "sec": 1.0, "second": 1.0, "seconds": 1.0, "ms": 1e-3, 
                "hours": 3600.0, "ns": 1e-9}  # fmt: skip
 #: hints naming what to set, used in every metadata error
 PIXEL_SIZE_HINT = "pass pixel_size= (m/px) or set [imaging] pixel_size_um in experiment.toml"
-TIME_HINT = "pass frame_interval= (s) or timestamps= (s), or set [imaging] frame_interval_s in experiment.toml"
+TIME_HINT = (
+    "pass frame_interval= (s) or timestamps= (s), or set [imaging] frame_interval_min or timestamps_min "
+    "in experiment.toml"
+)
 
 
 class MetadataError(ValueError):
@@ -1055,7 +1058,7 @@ def open_series(
                     raise MetadataError(
                         f"frame interval conflict: the file's timestamps say {d_file:.6g} s, "
                         f"frame_interval={float(frame_interval):.6g} s; drop frame_interval= "
-                        "(or [imaging] frame_interval_s) to use the file's times, or fix it"
+                        "(or [imaging] frame_interval_min) to use the file's times, or fix it"
                     )
             elif np.max(np.abs(fi - gi)) > tol:
                 raise MetadataError(

@@ -114,7 +114,7 @@ def test_missing_metadata_names_what_to_set(tmp_path, frames16):
     tifffile.imwrite(plain, frames16)  # no resolution, no times
     with pytest.raises(MetadataError, match=r"pixel size not in the metadata.*pixel_size=.*pixel_size_um"):
         open_series(plain, frame_interval=5.0)
-    with pytest.raises(MetadataError, match=r"timestamps not in the metadata.*frame_interval=.*frame_interval_s"):
+    with pytest.raises(MetadataError, match=r"timestamps not in the metadata.*frame_interval=.*frame_interval_min"):
         open_series(plain, pixel_size=PX)
     with pytest.warns(UserWarning, match="pixel size not in"):
         s = open_series(plain, frame_interval=5.0, missing="warn")
