@@ -34,7 +34,7 @@ Bad frames
 ----------
 Every frame file is checked when the series is opened without reading its
 pixels: a header that does not parse, image data running past the end of the
-file (a truncated TIFF or PNG, a JPEG without its end marker), or a frame
+file (a truncated TIFF, a PNG without its IEND chunk, a JPEG without its end marker), or a frame
 whose shape differs from the series' is flagged -- a warning naming the file,
 an entry in :attr:`FrameSeries.bad_frames` -- and skipped.  A frame that
 still fails when it is read raises :class:`FrameReadError` naming the file (and
@@ -555,9 +555,11 @@ def _probe_image_file(path, grey):
             stamp = _parse_exif_datetime(im.info["Creation Time"])
         dpi = im.info.get("dpi")
         px = _resolution_pixel_size(dpi[0], dpi[1], 2) if dpi else None
-    if suffix == ".png":
-        with Image.open(path) as im:
-            im.verify()  # reads every chunk and checks its CRC: a truncated PNG fails here
+    if suffix == ".png":  # a complete PNG ends with its IEND chunk (cheap: no pixel data read)
+        with open(path, "rb") as fh:
+            fh.seek(max(0, size - 12))
+            if fh.read()[-8:] != b"IEND\xaeB`\x82":
+                raise ValueError("PNG IEND chunk missing (file truncated)")
     dtype = {"I;16": np.uint16, "I;16B": np.uint16, "I;16L": np.uint16, "I": np.int32, "F": np.float32}.get(
         mode, np.uint8
     )
