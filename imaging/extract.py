@@ -298,6 +298,8 @@ def extract(
                 frame = first if i == 0 else src[i]
                 man = manual_px.get(i)
                 res = tracer.process(frame, i, guide=None if man is not None else guide_for(i), manual=man)
+                if res.geometry is None and errors == "raise":
+                    raise RuntimeError(f"frame {i} cannot be measured: {res.message}")
             except Exception as err:  # noqa: BLE001 - batch runs record failures as data
                 if errors == "raise":
                     raise

@@ -275,7 +275,9 @@ class ChamberTracer:
         if (cur.shape[0] // 2, cur.shape[1] // 2) != self._ref_patch.shape:
             return self._drift.copy()
         cur = self._highpass(cur)
-        shift, _, _ = phase_cross_correlation(self._ref_patch, cur, upsample_factor=1, normalization=None)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", UserWarning)  # an empty (black) frame: no RMS error estimate
+            shift, _, _ = phase_cross_correlation(self._ref_patch, cur, upsample_factor=1, normalization=None)
         # the shift registers the current patch onto the reference one (2x downsampled)
         return np.array([dx - 2 * shift[1], dy - 2 * shift[0]], float)
 

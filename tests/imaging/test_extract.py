@@ -1,0 +1,179 @@
+"""extract(): synthetic series -> SI Dataset, save/load round trips, manual input, end-to-end permeability."""
+
+import numpy as np
+import pytest
+import xarray as xr
+
+from osmobulge.imaging.extract import extract, load_extraction, save_extraction
+from osmobulge.imaging.synthetic import Nuisances, render_series
+from osmobulge.modeling.transport import Chamber
+
+CH = Chamber(radius=100e-6, depth=50e-6, thickness=10e-6, concentration=3000.0)
+SMALL = {"chamber": CH, "shape": (420, 440), "pixel_size": 1e-6}
+VT = [0.0, 0.5, 1.5, 3.0, 4.5]
+
+
+def lam(v):
+    return 1.0 + 0.02 * v
+
+
+@pytest.fixture(scope="module")
+def series():
+    return render_series(VT, nuisances=Nuisances(noise_sigma=0.01, drift_sigma=2.0, tilt=2.0), lambda_pre=lam,
+                         seed=11, **SMALL)
+
+
+@pytest.fixture(scope="module")
+def ds(series):
+    return extract(series.frames, pixel_size=1e-6, frame_interval=600.0, chamber=CH, progress=False,
+                   metadata={"experiment": {"name": "synthetic", "operator": None}, "temperature_c": 25.0})
+
+
+def test_dataset_matches_truth(series, ds):
+    t = series.truth
+    assert list(ds.flag.values) == ["ok"] * len(VT)
+    assert ds.sizes == {"time": len(VT), "s": 201}
+    np.testing.assert_allclose(ds.time, t.time)
+    a = CH.radius
+    layer = 0.5 * np.pi * a * a * 1e-6  # a 0.5 px layer over the well
+    assert np.all(np.abs(ds.volume - t.volume) <= np.maximum(0.02 * t.volume, layer))
+    np.testing.assert_allclose(ds.vtilde, t.vtilde, atol=layer / (np.pi * a**3) + 1e-12, rtol=0.02)
+    np.testing.assert_allclose(ds.volume_ratio, t.volume_ratio, rtol=0.01)
+    np.testing.assert_allclose(ds.area_ratio, t.area_ratio, rtol=0.02)
+    np.testing.assert_allclose(ds.rim_radius, t.rim_radius, atol=0.5e-6)
+    np.testing.assert_allclose(ds.lambda_pre, t.lambda_pre, atol=0.005)
+    np.testing.assert_allclose(ds.bulge_height, t.bulge_height, atol=0.5e-6)
+    np.testing.assert_allclose(ds.tilt, 2.0, atol=0.05)
+    # the ellipse description (paper Sec. 2.3) is close but not exact for these domes
+    np.testing.assert_allclose(ds.volume_ellipse[2:], t.volume[2:], rtol=0.05)
+    # lambda_pre(Vtilde) = 1 + c1 V + c2 V^2 through (0, 1) recovers the rendered law
+    assert ds.attrs["prestretch_c1"] == pytest.approx(0.02, abs=0.003)
+    assert abs(ds.attrs["prestretch_c2"]) < 1e-3
+    # the profile: the truth midline lies on it (height at the axis, rim ends)
+    i = 3
+    np.testing.assert_allclose(ds.profile_x[i, [0, -1]], [-t.rim_radius[i], t.rim_radius[i]], atol=0.5e-6)
+    np.testing.assert_allclose(ds.profile_z.isel(time=i).max(), t.bulge_height[i], atol=0.5e-6)
+
+
+def test_units_attrs_and_chamber(ds):
+    for name, var in ds.data_vars.items():
+        assert "long_name" in var.attrs, name
+        if var.dtype.kind == "f":
+            assert "units" in var.attrs, name
+    assert ds.volume.attrs["units"] == "m3" and ds.rim_radius.attrs["units"] == "m"
+    for k, v in CH.to_attrs().items():
+        assert ds.attrs[k] == v
+    assert ds.attrs["meta_experiment_name"] == "synthetic" and ds.attrs["meta_experiment_operator"] == "none"
+    assert ds.attrs["pixel_size"] == 1e-6 and ds.attrs["bulge_direction"] == "up"
+    assert "trace_search" in ds.attrs and ds.attrs["osmobulge_version"]
+    for v in ds.attrs.values():
+        assert not isinstance(v, dict | type(None) | bool)
+
+
+@pytest.mark.parametrize("suffix", [".nc", ".zarr"])
+def test_save_load_round_trip(ds, tmp_path, suffix):
+    path = save_extraction(ds, tmp_path / f"out{suffix}")
+    back = load_extraction(path)
+    xr.testing.assert_identical(back, ds)
+    # overwriting works and leaves no temporary files behind
+    save_extraction(ds, path)
+    assert sorted(p.name for p in tmp_path.iterdir()) == [path.name]
+
+
+def test_file_source_equals_array(series, ds, tmp_path):
+    path = series.save(tmp_path / "series", fmt="tiff")
+    from_file = extract(path, chamber=CH, progress=False)
+    np.testing.assert_allclose(from_file.volume, ds.volume, rtol=1e-9, atol=1e-22)
+    assert from_file.attrs["pixel_size"] == pytest.approx(1e-6)
+
+
+def test_manual_profiles_and_priors(monkeypatch):
+    from osmobulge.imaging import trace
+
+    nu = Nuisances(blur_sigma=3.0, noise_sigma=0.01)  # a faint sub-pixel membrane under heavy blur
+    s = render_series([0.0, 5.0, 5.2], nuisances=nu, seed=5, **SMALL)
+    t = s.truth.isel(time=1)
+    cols = np.r_[t.midline_col.values[0][::-1], t.midline_col.values[1][1:]]
+    rows = np.r_[t.midline_row.values[0][::-1], t.midline_row.values[1][1:]]
+    pts_m = np.c_[cols, rows] * 1e-6
+    # priors: a few picked points are the tracer's starting curve in their frame
+    guides = {}
+    original = trace.ChamberTracer.trace_dome
+
+    def spy(self, view, g, guide=None):
+        guides[len(guides)] = None if guide is None else np.asarray(guide).copy()
+        return original(self, view, g, guide)
+
+    monkeypatch.setattr(trace.ChamberTracer, "trace_dome", spy)
+    prior = extract(s.frames, pixel_size=1e-6, frame_interval=60.0, chamber=CH, progress=False,
+                    priors={1: pts_m[::40]})
+    assert guides[1] is not None and len(guides[1]) == len(pts_m[::40])
+    assert float(np.max(guides[1][:, 1])) == pytest.approx(float(t.bulge_height) / 1e-6, abs=1.0)
+    assert list(prior.flag.values) == ["ok"] * 3
+    assert float(prior.volume[1]) == pytest.approx(float(t.volume), rel=0.02)
+    assert prior.profile_source.values[1] == "auto"
+    assert list(prior.attrs["prior_frames"]) == [1]
+    # a manual profile replaces the trace and its volume/area are computed from it
+    man = extract(s.frames, pixel_size=1e-6, frame_interval=60.0, chamber=CH, progress=False,
+                  manual_profiles={1: pts_m})
+    assert list(man.profile_source.values) == ["auto", "manual", "auto"]
+    assert float(man.volume[1]) == pytest.approx(float(t.volume), rel=2e-3)
+    assert float(man.area_ratio[1]) == pytest.approx(float(t.area_ratio), rel=2e-3)
+
+
+def test_unreadable_frame_is_flagged_not_fatal(series):
+    frames = series.frames.copy()
+    frames[2] = 0  # a black frame: no band, no walls
+    out = extract(frames, pixel_size=1e-6, frame_interval=600.0, chamber=CH, progress=False)
+    assert out.flag.values[2] == "no_membrane" and np.isnan(out.volume.values[2])
+    assert out.flag.values[3] == "ok"
+    with pytest.raises(RuntimeError, match="frame 2"):
+        extract(frames[:3], pixel_size=1e-6, frame_interval=600.0, errors="raise", progress=False)
+
+
+def test_validation(series):
+    f = series.frames[:2]
+    with pytest.raises(ValueError, match="errors"):
+        extract(f, pixel_size=1e-6, frame_interval=1.0, errors="ignore")
+    with pytest.raises(ValueError, match="bulge_direction"):
+        extract(f, pixel_size=1e-6, frame_interval=1.0, bulge_direction="north")
+    with pytest.raises(ValueError, match="pixel"):
+        extract(f, frame_interval=1.0)
+    with pytest.raises(ValueError, match="frame_interval|timestamps"):
+        extract(f, pixel_size=1e-6)
+    with pytest.raises(ValueError, match="pixel_size"):
+        extract(f, pixel_size=1.0, frame_interval=1.0)
+    with pytest.raises(ValueError, match="priors"):
+        extract(f, pixel_size=1e-6, frame_interval=1.0, priors={5: np.zeros((5, 2))})
+    with pytest.raises(ValueError, match="manual_profiles"):
+        extract(f, pixel_size=1e-6, frame_interval=1.0, manual_profiles={1: np.zeros((3, 2))})
+    with pytest.raises(ValueError, match="n_profile"):
+        extract(f, pixel_size=1e-6, frame_interval=1.0, n_profile=3)
+    with pytest.raises(ValueError, match="fmt"):
+        save_extraction(xr.Dataset(), "x.nc", fmt="hdf")
+
+
+@pytest.mark.slow
+def test_end_to_end_permeability_recovered():
+    """Reference chamber, PDMS Table-3 law -> simulate -> render -> extract -> Eqn 27 fit: P_w(1) within 5 %."""
+    from osmobulge.imaging.synthetic import render_simulation
+    from osmobulge.modeling import PreStretch
+    from osmobulge.modeling.fitting import fit_permeability
+    from osmobulge.modeling.materials import PDMS
+    from osmobulge.modeling.permeability import DoubleExponential
+    from osmobulge.modeling.simulate import simulate
+    from osmobulge.modeling.transport import paper_chamber
+
+    ch = paper_chamber("reference")
+    pre = PreStretch(0.01, 0.0)
+    t = np.arange(0.0, 24.01, 1.0) * 3600.0
+    sim = simulate(ch, PDMS, DoubleExponential.PDMS, t, lambda_pre=pre)
+    s = render_simulation(sim, chamber=ch, pixel_size=2e-6, shape=(512, 512), lambda_pre=pre,
+                          nuisances=Nuisances(noise_sigma=0.01, drift_sigma=1.0), seed=1)
+    ds = extract(s.frames, pixel_size=2e-6, frame_interval=3600.0, chamber=ch, progress=False)
+    assert (ds.flag == "ok").all()
+    np.testing.assert_allclose(ds.volume_ratio, sim.volume_ratio, rtol=0.01)
+    ok = ds.where(ds.flag == "ok", drop=True)
+    measured = PreStretch(ds.attrs["prestretch_c1"], ds.attrs["prestretch_c2"])
+    fit = fit_permeability([ok], PDMS, model="double_exponential", lambda_pre=measured)
+    assert fit.p_at_rest == pytest.approx(DoubleExponential.PDMS(1.0), rel=0.05)
