@@ -38,7 +38,7 @@ from osmobulge.experiments.curation import REASONS
 from osmobulge.plugins._logic import layer_data_to_picks, rectangles_to_regions, regions_to_rectangles
 from osmobulge.plugins._reader import AUTO_LAYER, AXIS_LABELS, UNITS, auto_profile_layer_data, find_session
 
-__all__ = ["CurationWidget", "ProfilePicker", "bind_shortcuts", "SHORTCUTS"]
+__all__ = ["CurationWidget", "ProfilePicker", "bind_shortcuts", "open_experiment", "SHORTCUTS"]
 
 PICKS_LAYER = "picked points"
 FIT_LAYER = "profile fit"
@@ -363,7 +363,7 @@ class ProfilePicker(Container):
         self.fit_layer = _get_layer(self.viewer, FIT_LAYER) or self.viewer.add_shapes(
             name=FIT_LAYER, ndim=3, edge_width=1.0, face_color="transparent", **kw)
         self.points_layer = _get_layer(self.viewer, PICKS_LAYER) or self.viewer.add_points(
-            picks_to_layer_data(self.session.picks), name=PICKS_LAYER, ndim=3, size=4.0 * p_um,
+            picks_to_layer_data(self.session.picks), name=PICKS_LAYER, ndim=3, size=2.5 * p_um,
             face_color=COLORS["points"], border_color="white", border_width=0.1, out_of_slice_display=False, **kw)
         self.points_layer.events.data.connect(self._on_points)
         self.viewer.layers.selection.active = self.points_layer
@@ -500,3 +500,30 @@ class ProfilePicker(Container):
         out = self._guard(self.session.export_points, path)
         self._message.value = f"wrote {out}"
         return out
+
+
+def open_experiment(folder, viewer=None, *, frame: int | None = None):
+    """Open an experiment folder in napari with both osmobulge widgets docked.
+
+    Parameters
+    ----------
+    folder : path
+        Experiment folder (with ``experiment.toml``).
+    viewer : napari.Viewer, optional
+        Default: a new viewer.
+    frame : int, optional
+        Frame to show first (default: the first frame).
+
+    Returns
+    -------
+    viewer, curation_widget, profile_picker
+    """
+    import napari
+
+    viewer = viewer or napari.Viewer()
+    viewer.open(str(folder), plugin="osmobulge")
+    cw, pp = CurationWidget(viewer), ProfilePicker(viewer)
+    viewer.window.add_dock_widget(cw, name="Curation", area="right")
+    viewer.window.add_dock_widget(pp, name="Profile picker", area="right", tabify=False)
+    viewer.dims.set_current_step(0, int(frame or 0))
+    return viewer, cw, pp

@@ -161,15 +161,17 @@ def test_screenshot_overlay_is_on_the_profile(make_napari_viewer, experiment, tm
 
     from skimage.io import imsave
 
-    from osmobulge.plugins._widget import COLORS, CurationWidget, ProfilePicker
+    from osmobulge.plugins._widget import COLORS, open_experiment
 
     folder, truth = experiment
-    viewer = make_napari_viewer(show=True)
-    _open(viewer, folder)
-    cw, pp = CurationWidget(viewer), ProfilePicker(viewer)
-    viewer.window.add_dock_widget(cw, name="Curation", area="right")
-    viewer.window.add_dock_widget(pp, name="Profile picker", area="right")
-    viewer.dims.set_current_step(0, BAD)
+    docs_dir = os.environ.get("OSMOBULGE_SCREENSHOT_DIR")
+    if docs_dir:  # the docs figure shows the automatic profiles too
+        from osmobulge.experiments.runs import run_experiment
+
+        run_experiment(folder, ["process"], errors="raise")
+    viewer, cw, pp = open_experiment(folder, make_napari_viewer(show=True), frame=BAD)
+    assert set(viewer.window.dock_widgets) >= {"Curation", "Profile picker"}
+    assert viewer.dims.current_step[0] == BAD
     pp.set_points(_clicks(truth, BAD, n=14))
     pp.accept()
     assert COLORS["accepted"] == "lime"
@@ -193,10 +195,24 @@ def test_screenshot_overlay_is_on_the_profile(make_napari_viewer, experiment, tm
     # ... and the overlay covers the midline from rim to rim
     cover = np.min(np.hypot(mid[:, None, 0] - y[None, :], mid[:, None, 1] - x[None, :]), axis=1)
     assert np.mean(cover < 1.5) > 0.95
-    if os.environ.get("OSMOBULGE_SCREENSHOT_DIR"):  # regenerate the docs figure
+    if docs_dir:  # regenerate the docs figure: OSMOBULGE_SCREENSHOT_DIR=docs/img pytest -k screenshot
         pp.points_layer.visible = True
-        out = os.path.join(os.environ["OSMOBULGE_SCREENSHOT_DIR"], "curation.png")
-        imsave(out, viewer.screenshot(canvas_only=False, flash=False), check_contrast=False)
+        viewer.layers.selection.active = pp.points_layer
+        from qtpy.QtCore import Qt
+        from qtpy.QtWidgets import QApplication
+
+        win = viewer.window._qt_window
+        win.resize(1500, 900)
+        docks = [viewer.window.dock_widgets[n].native.parent() for n in ("Curation", "Profile picker")]
+        for dw in docks:
+            dw.show()
+        QApplication.processEvents()
+        win.resizeDocks(docks, [430, 430], Qt.Orientation.Horizontal)
+        win.resizeDocks(docks, [470, 330], Qt.Orientation.Vertical)
+        QApplication.processEvents()
+        viewer.reset_view()
+        shot = viewer.window.screenshot(canvas_only=False, flash=False)  # the whole window, docks included
+        imsave(os.path.join(docs_dir, "curation.png"), shot[..., :3], check_contrast=False)
 
 
 def test_regions_import_export_and_plot(make_napari_viewer, experiment, tmp_path):
