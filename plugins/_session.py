@@ -404,6 +404,12 @@ class CurationSession:
         self._save(cur_api.include_frame(self.curation, frame, by=by))
         self._emit("excluded", frame)
 
+    def keep_flagged(self, frame: int, note: str = "", *, by: str | None = None) -> None:
+        """Keep a frame in the fits although the automatic extraction flagged it, and save."""
+        frame = self.check_frame(frame)
+        self._save(cur_api.keep_flagged_frame(self.curation, frame, note, by=by, force=True))
+        self._emit("excluded", frame)
+
     def exclusion(self, frame: int) -> dict | None:
         """The exclusion record of a frame (reason, note, by, at), or None."""
         return self.curation.excluded.get(self.check_frame(frame))
@@ -448,16 +454,16 @@ class CurationSession:
         vol = np.full(n, np.nan)
         flag = np.array(["ok"] * n, dtype=object)
         source = np.array(["auto"] * n, dtype=object)
-        for f in range(n):
-            sub = self._ds_frame(f)
-            if sub is None:
-                continue
-            if "volume" in sub:
-                vol[f] = float(sub["volume"].values)
-            if "flag" in sub:
-                flag[f] = str(sub["flag"].values)
-            if "profile_source" in sub:
-                source[f] = str(sub["profile_source"].values)
+        ds = self.extraction
+        if ds is not None:
+            pos = np.asarray(ds["frame"].values).astype(int) if "frame" in ds.variables else np.arange(ds.sizes["time"])
+            keep = (pos >= 0) & (pos < n)
+            for name, out in (("volume", vol), ("flag", flag), ("profile_source", source)):
+                if name in ds:
+                    values = ds[name]
+                    if "chamber" in values.dims:
+                        values = values.isel(chamber=self.chamber)
+                    out[pos[keep]] = np.asarray(values.values)[keep]
         for f in self.curation.manual_profiles:
             if f < n:
                 fit = self.manual_fit(f)
@@ -498,6 +504,7 @@ class CurationSession:
             "time_min": (float(self.times[frame]) - t0) / 60.0,
             "flag": self.flag(frame),
             "excluded": None if exc is None else exc["reason"],
+            "kept_flagged": frame in self.curation.kept_flagged,
             "note": "" if exc is None else exc.get("note", ""),
             "manual": self.is_manual(frame),
             "n_picks": int(len(self.picks.get(frame, ()))),

@@ -139,24 +139,27 @@ class CurationWidget(Container):
         self._note = LineEdit(value="", label="note")
         self._exclude = PushButton(text="Exclude frame (Shift-X)")
         self._include = PushButton(text="Include frame (Shift-U)")
+        self._keep = PushButton(text="Keep although flagged")
         self._t0 = FloatSpinBox(value=0.0, min=-1e6, max=1e6, step=1.0, label="t0 (min, frame clock)")
         self._t0_set = PushButton(text="Set time origin")
         self._t0_here = PushButton(text="Time origin = this frame")
         self._regions = PushButton(text="Chamber regions from rectangles")
         self._message = Label(value="")
         nav = Container(widgets=[self._prev, self._next], layout="horizontal", labels=False)
-        exc = Container(widgets=[self._reason, self._note, self._exclude, self._include], labels=True)
+        exc = Container(widgets=[self._reason, self._note, self._exclude, self._include, self._keep], labels=True)
         t0 = Container(widgets=[self._t0, self._t0_set, self._t0_here], labels=True)
         self.extend([self._status, nav, exc, t0, self._regions, self._message])
         self._prev.changed.connect(lambda: self.step(-1))
         self._next.changed.connect(lambda: self.step(+1))
         self._exclude.changed.connect(self.exclude)
         self._include.changed.connect(self.include)
+        self._keep.changed.connect(self.keep_flagged)
         self._t0_set.changed.connect(self.set_time_origin)
         self._t0_here.changed.connect(self.set_time_origin_here)
         self._regions.changed.connect(self.set_regions)
         self.figure, self.ax, self.canvas = self._make_plot()
         napari_viewer.dims.events.current_step.connect(self._on_step)
+        napari_viewer.layers.events.inserted.connect(self._on_step)
         _register(napari_viewer, "curation", self)
         if self.session is not None:
             self.session.listeners.append(self._on_session)
@@ -243,6 +246,8 @@ class CurationWidget(Container):
             parts.append(f"auto: {s['flag']}")
         if s["excluded"]:
             parts.append(f"EXCLUDED ({s['excluded']})")
+        elif s["kept_flagged"]:
+            parts.append("kept although flagged")
         if s["manual"]:
             parts.append("manual profile")
         if np.isfinite(s["volume_ratio"]):
@@ -271,6 +276,10 @@ class CurationWidget(Container):
     def include(self) -> None:
         """Include the current frame again."""
         self._guard(self.session.include, self.frame)
+
+    def keep_flagged(self) -> None:
+        """Keep the current frame in the fits although the automatic extraction flagged it."""
+        self._guard(self.session.keep_flagged, self.frame, self._note.value)
 
     def set_time_origin(self) -> None:
         """Set t = 0 to the spin box value (minutes of the frame clock)."""
@@ -338,6 +347,7 @@ class ProfilePicker(Container):
         self.extend([Container(widgets=[self._snap, self._search], labels=True), self._info, self._accept,
                      self._clear, self._remove, self._semi, self._reprocess, io, self._message])
         self._updating = False
+        self._building = False
         self._accept.changed.connect(self.accept)
         self._clear.changed.connect(self.clear)
         self._remove.changed.connect(self.remove)
@@ -351,11 +361,19 @@ class ProfilePicker(Container):
             self._make_layers()
             self.session.listeners.append(self._on_session)
         napari_viewer.dims.events.current_step.connect(self._on_step)
+        napari_viewer.layers.events.inserted.connect(self._on_step)
         _register(napari_viewer, "picker", self)
         self.draw()
 
     # ------------------------------------------------------------------ layers
     def _make_layers(self):
+        self._building = True  # adding layers fires `inserted`, which redraws
+        try:
+            self._add_layers()
+        finally:
+            self._building = False
+
+    def _add_layers(self):
         from osmobulge.plugins._logic import picks_to_layer_data
 
         kw = _layer_kwargs(self.session)
@@ -412,6 +430,8 @@ class ProfilePicker(Container):
 
     def draw(self) -> None:
         """Draw the current frame's live spline and ellipse and show its volume and area."""
+        if self._building:
+            return
         if self.session is None:
             self.session = find_session(self.viewer)
             if self.session is None:

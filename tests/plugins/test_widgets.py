@@ -253,3 +253,37 @@ def test_regions_import_export_and_plot(make_napari_viewer, experiment, tmp_path
     assert "excluded" in labels
     (xline,) = [ln for ln in cw.ax.get_lines() if ln.get_label() == "excluded"]
     np.testing.assert_allclose(xline.get_xdata(), [cw.session.times[4] / 60.0])
+
+
+def test_widgets_from_the_manifest_before_the_experiment(make_napari_viewer, experiment):
+    """Widgets opened from the Plugins menu first; the experiment opened afterwards is picked up."""
+    folder, truth = experiment
+    viewer = make_napari_viewer()
+    _, cw = viewer.window.add_plugin_dock_widget("osmobulge", "Curation")
+    _, pp = viewer.window.add_plugin_dock_widget("osmobulge", "Profile picker")
+    assert cw.session is None and pp.session is None
+    _open(viewer, folder)
+    assert cw.session is pp.session is not None
+    assert pp.points_layer is not None and pp.fit_layer is not None
+    viewer.dims.set_current_step(0, 1)
+    assert cw._status.value.startswith("frame 2/6")
+    pp.set_points(_clicks(truth, 1))
+    assert "V/V0" in pp._info.value
+    # a flagged frame can be kept on purpose
+    cw._note.value = "flag is a false alarm"
+    cw._keep.clicked.emit()
+    assert load_curation(folder).kept_flagged[1]["note"] == "flag is a false alarm"
+    assert "kept although flagged" in cw._status.value
+
+
+def test_npe2_validate_command():
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    exe = Path(sys.executable).parent / "npe2"
+    if not exe.exists():
+        pytest.skip("npe2 command not installed next to this Python")
+    out = subprocess.run([str(exe), "validate", "osmobulge"], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stdout + out.stderr
+    assert "valid" in (out.stdout + out.stderr)
