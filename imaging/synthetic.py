@@ -49,7 +49,7 @@ import xarray as xr
 from scipy import ndimage
 
 from osmobulge import __version__
-from osmobulge.imaging._profiles import profiles
+from osmobulge.modeling.bulge import bulge_profiles as profiles
 from osmobulge.imaging._raster import Layer, band_polygon, blurred_band, circle_polygon
 from osmobulge.modeling.materials import PDMS
 

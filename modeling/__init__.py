@@ -10,8 +10,10 @@ Fits (Sec. 3.6-3.7, supplement Secs 6-7): :func:`fit_permeability`,
 from osmobulge.modeling import materials
 from osmobulge.modeling.bulge import (
     NoSolutionError,
+    ProfileBatch,
     bulge_mechanics,
     bulge_profile,
+    bulge_profiles,
     locking_volume,
     turgor_ratio,
 )
@@ -46,6 +48,8 @@ from osmobulge.modeling.transport import (
 __all__ = [
     "materials",
     "bulge_profile",
+    "bulge_profiles",
+    "ProfileBatch",
     "bulge_mechanics",
     "locking_volume",
     "turgor_ratio",

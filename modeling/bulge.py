@@ -17,10 +17,10 @@ from __future__ import annotations
 
 import functools
 import math
+from dataclasses import dataclass
 
 import numpy as np
 import xarray as xr
-from scipy.interpolate import CubicHermiteSpline
 
 from osmobulge import __version__
 from osmobulge.modeling import _shooting
@@ -30,6 +30,8 @@ from osmobulge.modeling.prestretch import check_prestretch
 
 __all__ = [
     "bulge_profile",
+    "bulge_profiles",
+    "ProfileBatch",
     "bulge_mechanics",
     "locking_volume",
     "turgor_ratio",
@@ -335,60 +337,228 @@ def bulge_profile(material, vtilde, lambda_pre=1.0, *, n=201) -> xr.Dataset:
     >>> float(p.z[0]) > float(p.r[-1]) * 0.9   # about a hemisphere
     True
     """
-    _check_material(material)
-    if isinstance(material, LinearElastic):
-        raise TypeError("bulge_profile needs a hyperelastic law; LinearElastic has only closed-form f_A, f_l, f_p")
     v = _check_vtilde(vtilde)
     if v.size != 1 or v[0] <= 0:
         raise ValueError(f"vtilde must be a single positive number, got {vtilde!r}")
     if int(n) < 3:
         raise ValueError(f"n must be >= 3, got {n!r}")
-    ell = check_prestretch(lambda_pre, v)
-    res = _solve(material, v, ell)
-    lam0, p = res["lam0"], res["pressure"]
-    shot = _shooting.shoot(material, lam0, ell, p, keep_path=True, rho_max=1.05)
-    rs = shot["rho_star"][0]
-    if not np.isfinite(rs):
-        raise NoSolutionError(f"final profile integration failed at vtilde={v[0]:.6g}")
-    mesh, path = shot["rho"], shot["path"][:, :, 0]
-    deriv = _shooting.rhs(material, mesh, path, p[0])
-    rho = np.linspace(0.0, 1.0, int(n))
-    rho_ref = rho * rs  # coordinates of the shot
-    ys = np.empty((_shooting.N_STATE, rho.size))
-    inside = rho_ref >= mesh[0]
-    for i in range(_shooting.N_STATE):
-        ys[i, inside] = CubicHermiteSpline(mesh, path[i], deriv[i])(rho_ref[inside])
-    if np.any(~inside):  # within RHO_START of the pole: the series is exact to rounding
-        m = int((~inside).sum())
-        ys[:, ~inside] = _shooting.pole_series(material, np.full(m, lam0[0]), np.full(m, p[0]), rho_ref[~inside])
-    y_end = shot["y_star"][:, 0]
-    lxi, al, lphi = ys[_shooting.IXI], ys[_shooting.IAL], ys[_shooting.IPHI]
-    r = lphi * rho
-    z = (y_end[_shooting.IZ] - ys[_shooting.IZ]) / rs
+    b = _profiles(material, v, lambda_pre, n=int(n))
     dims = ("rho",)
     ds = xr.Dataset(
         {
-            "r": (dims, r, {"units": "1", "long_name": "radial position r/a"}),
-            "z": (dims, z, {"units": "1", "long_name": "height above the rim plane z/a"}),
-            "lambda_xi": (dims, lxi, {"units": "1", "long_name": "meridional stretch"}),
-            "lambda_phi": (dims, lphi, {"units": "1", "long_name": "hoop stretch"}),
-            "thickness_ratio": (dims, 1.0 / (lxi * lphi), {"units": "1", "long_name": "thickness ratio l/l0"}),
-            "alpha": (dims, al, {"units": "rad", "long_name": "meridian tangent angle"}),
+            "r": (dims, b.r[0], {"units": "1", "long_name": "radial position r/a"}),
+            "z": (dims, b.z[0], {"units": "1", "long_name": "height above the rim plane z/a"}),
+            "lambda_xi": (dims, b.lambda_xi[0], {"units": "1", "long_name": "meridional stretch"}),
+            "lambda_phi": (dims, b.lambda_phi[0], {"units": "1", "long_name": "hoop stretch"}),
+            "thickness_ratio": (dims, b.thickness[0], {"units": "1", "long_name": "thickness ratio l/l0"}),
+            "alpha": (dims, b.alpha[0], {"units": "rad", "long_name": "meridian tangent angle"}),
         },
-        coords={"rho": (dims, rho, {"units": "1", "long_name": "reference radius rho/a"})},
+        coords={"rho": (dims, b.rho, {"units": "1", "long_name": "reference radius rho/a"})},
         attrs=_material_attrs(material)
         | {
             "vtilde": float(v[0]),
-            "lambda_pre": float(ell[0]),
-            "pressure": float(p[0]),
-            "area_ratio": float(res["area_ratio"][0]),
-            "inverse_thickness": float(res["inverse_thickness"][0]),
-            "bulge_height": float(res["height"][0]),
-            "pole_stretch": float(lam0[0]),
+            "lambda_pre": float(b.lambda_pre[0]),
+            "pressure": float(b.pressure[0]),
+            "area_ratio": float(b.area_ratio[0]),
+            "inverse_thickness": float(b.inverse_thickness[0]),
+            "bulge_height": float(b.bulge_height[0]),
+            "pole_stretch": float(b.pole_stretch[0]),
             "title": "membrane bulge profile",
         },
     )
     return ds
+
+
+def _refine_factor(material, lam0):
+    """Mesh refinement of the final profile shot: 4x everywhere near Gent locking."""
+    lock = material.locking_stretch
+    return 4 if math.isfinite(lock) and np.any((lock - np.asarray(lam0)) / lock < 1e-3) else 1
+
+
+_BATCH_FIELDS = (
+    "vtilde", "lambda_pre", "rho", "r", "z", "thickness", "lambda_xi", "lambda_phi", "alpha",
+    "area_ratio", "bulge_height", "pressure", "pole_stretch", "inverse_thickness",
+)
+
+
+@dataclass(frozen=True)
+class ProfileBatch:
+    """Deformed midlines of several bulges, in units of the chamber radius ``a``.
+
+    Attributes
+    ----------
+    vtilde : ndarray of shape (N,)
+        Dimensionless bulge volumes :math:`\\tilde V`.
+    lambda_pre : ndarray of shape (N,)
+        Rim pre-stretch of each row.
+    rho : ndarray of shape (M,)
+        Reference radii in [0, 1] (pole to rim).
+    r, z : ndarray of shape (N, M)
+        Deformed midline, r/a and z/a (height above the rim plane).
+    thickness : ndarray of shape (N, M)
+        Thickness ratio l/l0 (Eqn 18).
+    lambda_xi, lambda_phi, alpha : ndarray of shape (N, M)
+        Meridional and hoop stretches and the tangent angle of Fig. 3a (rad).
+    area_ratio, bulge_height, pressure : ndarray of shape (N,)
+        :math:`f_A`, :math:`\\delta/a` and :math:`P_t a/(C_1 l_0)`.
+    """
+
+    vtilde: np.ndarray
+    lambda_pre: np.ndarray
+    rho: np.ndarray
+    r: np.ndarray
+    z: np.ndarray
+    thickness: np.ndarray
+    lambda_xi: np.ndarray
+    lambda_phi: np.ndarray
+    alpha: np.ndarray
+    area_ratio: np.ndarray
+    bulge_height: np.ndarray
+    pressure: np.ndarray
+    pole_stretch: np.ndarray
+    inverse_thickness: np.ndarray
+
+
+def _hermite_rows(mesh, path, deriv, rho_ref):
+    """Cubic Hermite interpolation of ``path`` (8, M, N) at ``rho_ref`` (N, K) per row."""
+    n, k = rho_ref.shape
+    j = np.clip(np.searchsorted(mesh, rho_ref, side="right") - 1, 0, mesh.size - 2)
+    h = mesh[j + 1] - mesh[j]
+    theta = (rho_ref - mesh[j]) / h
+    cols = np.broadcast_to(np.arange(n)[:, None], (n, k))
+    y0, y1 = path[:, j, cols], path[:, j + 1, cols]
+    f0, f1 = deriv[:, j, cols], deriv[:, j + 1, cols]
+    return _shooting._hermite(y0, f0, y1, f1, h, theta)
+
+
+def bulge_profiles(material, vtilde, lambda_pre=1.0, *, n=401) -> ProfileBatch:
+    r"""Bulge midlines for many dimensionless volumes in one vectorised solve.
+
+    Parameters
+    ----------
+    material : Material
+        Hyperelastic law, e.g. ``osmobulge.modeling.materials.PDMS``.
+    vtilde : array_like of shape (N,)
+        Dimensionless bulge volumes :math:`\tilde V = \Delta V/(\pi a^3) \geq 0`,
+        any order, repeats allowed (each distinct value is solved once).
+    lambda_pre : float or callable
+        Rim pre-stretch, constant or a function of :math:`\tilde V`.
+    n : int
+        Number of reference radii ``rho`` in [0, 1].
+
+    Returns
+    -------
+    ProfileBatch
+        Rows in the order of ``vtilde``.  A flat row (:math:`\tilde V = 0`) has
+        ``r = rho * lambda_pre``, ``z = 0`` and thickness :math:`\lambda_{pre}^{-2}`.
+
+    Raises
+    ------
+    osmobulge.modeling.NoSolutionError
+        For a volume at or beyond the law's locking limit.
+
+    Notes
+    -----
+    Memoised (last 32 calls) when the material and ``lambda_pre`` are
+    hashable; the returned arrays are then read-only.
+
+    :func:`bulge_profile` is the one-volume view of this function, as an
+    ``xarray.Dataset`` (main text Eqns 17-24).
+    """
+    v_all = _check_vtilde(vtilde)
+    levels, inverse = np.unique(v_all, return_inverse=True)
+    key = tuple(levels.tolist())
+    try:
+        out = _profiles_cached(material, key, lambda_pre, int(n))
+    except TypeError as err:  # unhashable material or lambda_pre
+        if "unhashable" not in str(err):
+            raise
+        out = _profiles(material, levels, lambda_pre, n=n)
+    if levels.size == v_all.size and np.all(inverse == np.arange(v_all.size)):
+        return out
+    return ProfileBatch(**{f: (out.rho if f == "rho" else getattr(out, f)[inverse]) for f in _BATCH_FIELDS})
+
+
+@functools.lru_cache(maxsize=32)
+def _profiles_cached(material, v, lambda_pre, n):
+    out = _profiles(material, np.asarray(v, float), lambda_pre, n=n)
+    for f in _BATCH_FIELDS:
+        getattr(out, f).setflags(write=False)
+    return out
+
+
+def _profiles(material, vtilde, lambda_pre=1.0, *, n=401) -> ProfileBatch:
+    """Uncached :func:`bulge_profiles`."""
+    _check_material(material)
+    if isinstance(material, LinearElastic):
+        raise TypeError("bulge_profile needs a hyperelastic law; LinearElastic has only closed-form f_A, f_l, f_p")
+    v_all = _check_vtilde(vtilde)
+    if int(n) < 3:
+        raise ValueError(f"n must be >= 3, got {n!r}")
+    ell_all = check_prestretch(lambda_pre, v_all)
+    rho = np.linspace(0.0, 1.0, int(n))
+    keys, inverse = np.unique(np.stack([v_all, ell_all], axis=1), axis=0, return_inverse=True)
+    inverse = np.asarray(inverse).ravel()
+    v, ell = keys[:, 0], keys[:, 1]
+    m = v.size
+    r = rho[None, :] * ell[:, None]
+    z = np.zeros((m, rho.size))
+    thick = np.broadcast_to(ell[:, None] ** -2.0, (m, rho.size)).copy()
+    lxi_all = np.broadcast_to(ell[:, None], (m, rho.size)).copy()
+    lphi_all = lxi_all.copy()
+    alpha = np.zeros((m, rho.size))
+    area = ell**2
+    inv_thick = ell**2
+    pole = ell.copy()
+    height = np.zeros(m)
+    press = np.zeros(m)
+    pos = v > 0
+    if np.any(pos):
+        vp, lp = v[pos], ell[pos]
+        res = _solve(material, vp, lp)
+        lam0, p = res["lam0"], res["pressure"]
+        shot = _shooting.shoot(material, lam0, lp, p, keep_path=True, rho_max=1.05,
+                               steps=_shooting.DEFAULT_STEPS * _refine_factor(material, lam0))
+        rs = shot["rho_star"]
+        if not np.all(np.isfinite(rs)):
+            i = int(np.argmin(np.isfinite(rs)))
+            raise NoSolutionError(f"final profile integration failed at vtilde={vp[i]:.6g}")
+        mesh, path = shot["rho"], shot["path"]
+        with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+            deriv = _shooting.rhs(material, mesh[:, None], path, p[None, :])
+        rho_ref = rho[None, :] * rs[:, None]
+        ys = _hermite_rows(mesh, path, deriv, np.maximum(rho_ref, mesh[0]))
+        near = rho_ref < mesh[0]
+        if np.any(near):  # within RHO_START of the pole: the series is exact to rounding
+            rows, cols = np.nonzero(near)
+            ys[:, rows, cols] = _shooting.pole_series(material, lam0[rows], p[rows], rho_ref[rows, cols])
+        y_end = shot["y_star"]
+        lxi, lphi = ys[_shooting.IXI], ys[_shooting.IPHI]
+        r[pos] = lphi * rho[None, :]
+        z[pos] = (y_end[_shooting.IZ][:, None] - ys[_shooting.IZ]) / rs[:, None]
+        thick[pos] = 1.0 / (lxi * lphi)
+        lxi_all[pos], lphi_all[pos], alpha[pos] = lxi, lphi, ys[_shooting.IAL]
+        area[pos] = res["area_ratio"]
+        inv_thick[pos] = res["inverse_thickness"]
+        pole[pos] = lam0
+        height[pos] = res["height"]
+        press[pos] = p
+    return ProfileBatch(
+        vtilde=v_all,
+        lambda_pre=ell_all,
+        rho=rho,
+        r=r[inverse],
+        z=z[inverse],
+        thickness=thick[inverse],
+        lambda_xi=lxi_all[inverse],
+        lambda_phi=lphi_all[inverse],
+        alpha=alpha[inverse],
+        area_ratio=area[inverse],
+        bulge_height=height[inverse],
+        pressure=press[inverse],
+        pole_stretch=pole[inverse],
+        inverse_thickness=inv_thick[inverse],
+    )
 
 
 def turgor_ratio(pressure, material, thickness_over_radius):

@@ -14,7 +14,7 @@ from scipy import ndimage
 from scipy.interpolate import CubicSpline
 from scipy.spatial import cKDTree
 
-from osmobulge.imaging._profiles import profiles
+from osmobulge.modeling.bulge import bulge_profiles as profiles
 from osmobulge.imaging.synthetic import (
     Nuisances,
     SceneGeometry,
