@@ -314,10 +314,11 @@ def test_opening_reads_no_pixels_and_memory_stays_flat(tmp_path, monkeypatch, co
         for k in range(20, n):
             float(s[k][0, 0])
         cur_all, peak_all = tracemalloc.get_traced_memory()
-        # flat in the number of frames: reading 180 more frames keeps no pixels (tifffile's
-        # per-page bookkeeping grows by ~1.5 kB a page read, 1.5 % of a frame)
-        assert peak_all < peak_20 + 0.02 * n * frame_bytes
-        assert cur_all < cur_open + 0.02 * n * frame_bytes
+        # flat in the number of frames: reading 180 more frames keeps no pixels (holding them
+        # would add 180 frames = 17.7 MB; tifffile's per-page bookkeeping grows by ~1.5 kB a
+        # page read, and a full test run adds a few hundred kB of unrelated interpreter noise)
+        assert peak_all < peak_20 + 5 * frame_bytes
+        assert cur_all < cur_open + 5 * frame_bytes
         assert peak_20 < cur_open + 10 * frame_bytes  # decoding buffers of one frame, not 20 frames
         assert reads["n"] == (n if compression else 0)  # memory-mapped when uncompressed
         s.close()
