@@ -360,6 +360,8 @@ class ChamberTracer:
         ax = well.centre
         line = line.shifted(ax, 0.0)
         well = replace(well, u_left=well.u_left - ax, u_right=well.u_right - ax)
+        if not (np.isfinite(con) and abs(con) > 0.3 * abs(g0.contrast)):
+            con = g0.contrast  # too few clean flat columns in this frame: keep the first frame's
         geom = replace(g0, line=line, rim_radius=well.half_width, well=well, contrast=con, line_rms=rms,
                        wall_rms=wall_rms)
         return geom, drift

@@ -1,0 +1,214 @@
+"""Benchmark: image extraction accuracy per nuisance, speed vs reading, memory vs series length (issue 4).
+
+Run with ``python benchmarks/imaging.py [--quick] [--frames 500]``.
+
+1. **Accuracy** on synthetic series of the paper's reference chamber
+   (a = 200 um, h = 110 um, l0 = 20 um; 1 um/px, 1024 x 1024 frames, rim
+   pre-stretch 1 + 0.01 Vtilde) over Vtilde = 0 .. 7, one row per nuisance and
+   one with all of them: the largest profile RMS error (px, distance of the
+   true midline from the traced curve), volume error (relative; a 0.5 px layer
+   over the well counts as the floor -- the column "dV/tol" must stay <= 1),
+   area-ratio error, rim-radius error (px), and frames flagged as rendered.
+   Targets: RMS < 0.5 px, dV/tol <= 1, dA < 2 %, dR < 0.5 px, over the frames
+   rendered without an event (a neighbour's bulge may touch in late frames:
+   those must be flagged, their figures are not counted).  One more row
+   renders delaminated, fractured (gap and collapsed) and touching frames and
+   counts the flags that match.
+2. **Speed**: a multi-page 16-bit 1024 x 1024 TIFF read frame by frame with
+   :func:`osmobulge.imaging.io.open_series` (median of 3 passes) versus
+   :func:`osmobulge.imaging.extract` on the same file, single core.
+   Target: extraction no slower than 5x reading.
+3. **Memory**: peak traced heap (tracemalloc, numpy buffers included) of
+   ``extract`` on a 100- and a 500-frame TIFF.  Target: flat in the number of frames.
+
+BLAS/OpenMP are pinned to one thread and the process to one CPU where allowed.
+"""
+
+from __future__ import annotations
+
+import os
+
+for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMEXPR_NUM_THREADS",
+             "VECLIB_MAXIMUM_THREADS", "BLIS_NUM_THREADS"):
+    os.environ[_var] = "1"
+
+import argparse  # noqa: E402
+import tempfile  # noqa: E402
+import time  # noqa: E402
+import tracemalloc  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import numpy as np  # noqa: E402
+from scipy.spatial import cKDTree  # noqa: E402
+
+from osmobulge.imaging._chamber import FrameView  # noqa: E402
+from osmobulge.imaging.extract import extract  # noqa: E402
+from osmobulge.imaging.io import open_series  # noqa: E402
+from osmobulge.imaging.synthetic import Nuisances, render_series  # noqa: E402
+from osmobulge.imaging.trace import trace_series  # noqa: E402
+from osmobulge.modeling import PreStretch  # noqa: E402
+
+REF = (200e-6, 110e-6, 20e-6)
+PRE = PreStretch(0.01, 0.0)
+VT = [0.0, 0.05, 0.3, 0.67, 1.5, 3.0, 5.0, 7.0]
+NUISANCES = {
+    "clean (16-bit, blur 1 px)": Nuisances(),
+    "inverted contrast": Nuisances(polarity=-1),
+    "low contrast (x0.3)": Nuisances(contrast=0.3, noise_sigma=0.01),
+    "illumination gradient 0.4 + vignetting 0.3": Nuisances(illumination_gradient=0.4, vignetting=0.3),
+    "8-bit": Nuisances(bit_depth=8),
+    "noise 3 % + shot noise": Nuisances(noise_sigma=0.03, poisson_photons=2000),
+    "blur 2.5 px": Nuisances(blur_sigma=2.5),
+    "tilt -4 deg": Nuisances(tilt=-4.0),
+    "drift 6 px/frame": Nuisances(drift_sigma=6.0),
+    "dust 40 specks": Nuisances(dust_count=40, dust_opacity=0.5),
+    "neighbours (2, one touching at Vtilde >= 5)": Nuisances(neighbours=((560e-6, 0.4), (-560e-6, 0.15))),
+    "all of the above": Nuisances(polarity=-1, contrast=0.6, illumination_gradient=0.3, vignetting=0.2, bit_depth=8,
+                                  noise_sigma=0.02, poisson_photons=3000, blur_sigma=1.5, tilt=3.0, drift_sigma=4.0,
+                                  dust_count=30, neighbours=((560e-6, 0.4),)),
+}
+
+
+def _pin_one_cpu():
+    try:
+        os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]})
+        return "pinned to 1 CPU"
+    except (AttributeError, OSError):
+        return "not pinned"
+
+
+def frame_errors(series, tracer, traces):
+    """Profile RMS (px), dV/tol, |dA|/A, |dR| (px) per frame."""
+    tr = series.truth
+    p = tr.attrs["pixel_size"]
+    a = tr.attrs["chamber_radius"] / p
+    rows = []
+    for i, r in enumerate(traces):
+        t = tr.isel(time=i)
+        if r.geometry is None or not len(r.u):
+            rows.append((np.nan, np.nan, np.nan, np.nan))
+            continue
+        v = FrameView(series.frames[i], tracer.k)
+        pts = r.geometry.line.point(r.u, r.z)
+        rr, cc = v.to_frame(pts[:, 0], pts[:, 1])
+        sd = np.r_[0, np.cumsum(np.hypot(np.diff(cc), np.diff(rr)))]
+        si = np.arange(0, sd[-1], 0.05)
+        d, _ = cKDTree(np.c_[np.interp(si, sd, cc), np.interp(si, sd, rr)]).query(
+            np.c_[t.midline_col.values.ravel(), t.midline_row.values.ravel()])
+        v_true = float(t.volume) / p**3
+        tol = max(0.02 * v_true, 0.5 * np.pi * (float(t.rim_radius) / p) ** 2)
+        rows.append((float(np.sqrt(np.mean(d**2))), abs(r.volume - v_true) / tol,
+                     abs(r.area / (np.pi * a * a) / float(t.area_ratio) - 1), abs(r.geometry.rim_radius
+                                                                              - float(t.rim_radius) / p)))
+    return np.array(rows)
+
+
+def accuracy(quick):
+    print("\n## Accuracy per nuisance (reference chamber, 1 um/px, 1024 x 1024, Vtilde = 0 .. 7)\n")
+    head = (f"| {'nuisance':44s} | RMS px | dV/tol | dA %  | dR px | flags ok | s/frame |\n"
+            f"|{'-' * 46}|--------|--------|-------|-------|----------|---------|")
+    print(head)
+    vt = VT[::2] + [VT[-1]] if quick else VT
+    for name, nu in NUISANCES.items():
+        s = render_series(vt, chamber=REF, lambda_pre=PRE, nuisances=nu, seed=7)
+        t0 = time.perf_counter()
+        tracer, traces = trace_series(s.frames)
+        dt = (time.perf_counter() - t0) / len(vt)
+        e = frame_errors(s, tracer, traces)
+        ok = sum(r.flag == f for r, f in zip(traces, s.truth.flag.values, strict=True))
+        good = s.truth.flag.values == "ok"  # accuracy over the frames rendered without an event
+        good_a = good & (np.asarray(vt) > 0)
+        print(f"| {name:44s} | {np.nanmax(e[good, 0]):6.3f} | {np.nanmax(e[good, 1]):6.3f} |"
+              f" {100 * np.nanmax(e[good_a, 2]):5.2f} | {np.nanmax(e[good, 3]):5.3f} | {ok:3d}/{len(vt):<4d} |"
+              f" {dt:7.3f} |")
+    nu = Nuisances(neighbours=((560e-6, 0.2),), delaminated_frames=(1, 5), fractured_frames=(2, 6),
+                   touching_frames=(3, 7))
+    v = [0.0, 1.0, 1.5, 2.0, 2.5, 3.0, 3.5, 4.5]
+    s = render_series(v, chamber=REF, lambda_pre=PRE, nuisances=nu, seed=8)
+    _, traces = trace_series(s.frames)
+    got = [r.flag for r in traces]
+    want = list(s.truth.flag.values)
+    s2 = render_series([0.0, 1.0, 2.0], chamber=REF, nuisances=Nuisances(fractured_frames=(1, 2),
+                                                                          fracture_mode="collapsed"), seed=9)
+    _, tr2 = trace_series(s2.frames)
+    got += [r.flag for r in tr2]
+    want += list(s2.truth.flag.values)
+    n_ok = sum(a == b for a, b in zip(got, want, strict=True))
+    print(f"\nEvent frames (delaminated, fractured gap/collapsed, touching): {n_ok}/{len(want)} flags right")
+    print("  rendered: " + " ".join(want))
+    print("  flagged:  " + " ".join(got))
+
+
+def _write_tiff(path, frames_iter, pixel_size, interval):
+    import tifffile
+
+    with tifffile.TiffWriter(path, bigtiff=True) as tw:
+        for f in frames_iter:
+            tw.write(f, contiguous=True, resolution=(1e-2 / pixel_size, 1e-2 / pixel_size),
+                     resolutionunit="CENTIMETER", metadata=None)
+    return path
+
+
+def _series_file(folder, n, base):
+    """A TIFF of n 1024x1024 16-bit frames cycling through the rendered base frames (growth then repeat)."""
+    path = Path(folder) / f"series_{n}.tif"
+    return _write_tiff(path, (base[i % len(base)] for i in range(n)), 1e-6, 600.0)
+
+
+def speed_and_memory(n_speed, n_mem, quick):
+    print("\n## Speed (1024 x 1024 16-bit, one core) and memory\n")
+    vt = np.linspace(0.0, 5.0, 40)
+    base = render_series(vt, chamber=REF, lambda_pre=PRE, nuisances=Nuisances(noise_sigma=0.01, drift_sigma=1.0),
+                         seed=3).frames
+    with tempfile.TemporaryDirectory() as tmp:
+        path = _series_file(tmp, n_speed, base)
+        reads = []
+        for _ in range(3):
+            t0 = time.perf_counter()
+            ser = open_series(path, frame_interval=600.0)
+            for i in range(len(ser)):
+                ser[i]
+            reads.append(time.perf_counter() - t0)
+            ser.close()
+        t_read = float(np.median(reads)) / n_speed
+        t0 = time.perf_counter()
+        ds = extract(path, frame_interval=600.0, progress=False)
+        t_ext = (time.perf_counter() - t0) / n_speed
+        print("| step | ms/frame | frames/s |\n|---|---|---|")
+        print(f"| read (open_series, {n_speed} frames) | {1e3 * t_read:.2f} | {1 / t_read:.1f} |")
+        print(f"| extract (incl. reading) | {1e3 * t_ext:.1f} | {1 / t_ext:.2f} |")
+        print(f"\nextraction / reading = {t_ext / t_read:.1f}x (target <= 5x); "
+              f"{int((ds.flag == 'ok').sum())}/{n_speed} frames ok")
+        rows = []
+        for n in (100, n_mem):
+            p = _series_file(tmp, n, base)
+            tracemalloc.start()
+            t0 = time.perf_counter()
+            extract(p, frame_interval=600.0, progress=False)
+            el = time.perf_counter() - t0
+            _, peak = tracemalloc.get_traced_memory()
+            tracemalloc.stop()
+            rows.append((n, peak / 2**20, el))
+            os.remove(p)
+        print("\n| frames | peak traced heap MiB | time s |\n|---|---|---|")
+        for n, mib, el in rows:
+            print(f"| {n} | {mib:.1f} | {el:.1f} |")
+        print(f"\npeak({n_mem}) / peak(100) = {rows[1][1] / rows[0][1]:.2f} (target: ~1, flat in the frames; "
+              f"the frames alone would be {n_mem * 2:.0f} MiB)")
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="fewer volumes and frames")
+    ap.add_argument("--frames", type=int, default=500, help="frames of the long series of the memory test")
+    ap.add_argument("--speed-frames", type=int, default=40, help="frames of the speed test")
+    ap.add_argument("--skip-accuracy", action="store_true")
+    args = ap.parse_args()
+    print(f"# osmobulge imaging benchmark ({_pin_one_cpu()}; load average {os.getloadavg()[0]:.2f})")
+    if not args.skip_accuracy:
+        accuracy(args.quick)
+    speed_and_memory(args.speed_frames, 200 if args.quick else args.frames, args.quick)
+
+
+if __name__ == "__main__":
+    main()
