@@ -152,3 +152,25 @@ def test_semi_automatic_tracing_uses_the_picks_as_priors(experiment):
         assert np.sqrt(np.mean(d**2)) < 0.5, (f, np.sqrt(np.mean(d**2)))
     with pytest.raises(ValueError, match="at least one frame"):
         CurationSession(folder).trace_with_priors()
+
+
+def test_module_entry_point_help(capsys):
+    from osmobulge.plugins.__main__ import main
+
+    with pytest.raises(SystemExit) as exc:
+        main(["--help"])
+    assert exc.value.code == 0
+    assert "experiment folder" in capsys.readouterr().out
+
+
+def test_logic_modules_import_no_qt():
+    """The logic behind the widgets runs with no Qt and no napari at all."""
+    import subprocess
+    import sys
+
+    code = ("import sys; import osmobulge.plugins._session, osmobulge.plugins._logic, osmobulge.plugins.roi, "
+            "osmobulge.plugins._reader; "
+            "bad = [m for m in sys.modules if m.split('.')[0] in ('qtpy', 'PyQt5', 'PyQt6', 'PySide6', 'napari', "
+            "'magicgui', 'vispy')]; print(bad); sys.exit(1 if bad else 0)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stdout + out.stderr

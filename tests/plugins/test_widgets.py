@@ -54,6 +54,10 @@ def test_reader_opens_the_experiment(make_napari_viewer, experiment):
     assert tuple(viewer.dims.axis_labels) == ("frame", "y", "x")
     assert image.metadata["osmobulge"]["folder"] == str(folder)
     assert "auto profiles" not in viewer.layers  # not processed yet
+    # experiment.toml itself is claimed by this reader alone (no reader choice needed)
+    viewer2 = make_napari_viewer()
+    (layer,) = viewer2.open(str(folder / "experiment.toml"), plugin=None)
+    assert layer.metadata["osmobulge"]["folder"] == str(folder)
 
 
 def test_widgets_pick_accept_exclude(make_napari_viewer, experiment, qtbot):
