@@ -153,6 +153,30 @@ def test_validation(series):
         save_extraction(xr.Dataset(), "x.nc", fmt="hdf")
 
 
+def test_cli_extract(series, tmp_path):
+    import json
+
+    from typer.testing import CliRunner
+
+    from osmobulge.experiments.cli import app
+
+    path = series.save(tmp_path / "series", fmt="tiff")
+    out = tmp_path / "out.nc"
+    args = ["extract", str(path), str(out), "--chamber-radius-um", "100", "--chamber-depth-um", "50",
+            "--membrane-thickness-um", "10", "--concentration-molar", "3", "--json"]
+    res = CliRunner().invoke(app, args)
+    assert res.exit_code == 0, res.output
+    summary = json.loads(res.output.strip().splitlines()[-1])
+    assert summary["frames"] == len(VT) and summary["flags"] == {"ok": len(VT)}
+    back = load_extraction(out)
+    assert back.attrs["chamber_radius"] == pytest.approx(100e-6)
+    assert summary["prestretch_c1"] == pytest.approx(0.02, abs=0.003)
+    bad = CliRunner().invoke(app, ["extract", str(path), str(tmp_path / "out.txt")])
+    assert bad.exit_code != 0 and ".txt" in bad.output
+    half = CliRunner().invoke(app, ["extract", str(path), str(out), "--chamber-radius-um", "100"])
+    assert half.exit_code != 0 and "membrane-thickness" in half.output
+
+
 @pytest.mark.slow
 def test_end_to_end_permeability_recovered():
     """Reference chamber, PDMS Table-3 law -> simulate -> render -> extract -> Eqn 27 fit: P_w(1) within 5 %."""

@@ -1,0 +1,127 @@
+"""CLI command of the image pipeline: ``osmobulge extract SOURCE OUT.nc``."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from osmobulge.experiments.cli import app
+
+#: output formats, chosen by the output path's suffix
+OUTPUT_SUFFIXES = (".nc", ".zarr")
+DIRECTIONS = ("auto", "up", "down", "left", "right")
+ERRORS = ("flag", "raise")
+
+
+def _chamber(preset, radius_um, depth_um, thickness_um, concentration_molar):
+    from osmobulge.modeling.transport import Chamber, paper_chamber
+
+    given = [v is not None for v in (radius_um, depth_um, thickness_um)]
+    if preset is not None:
+        try:
+            ch = paper_chamber(preset)
+        except (KeyError, ValueError) as err:
+            raise typer.BadParameter(str(err), param_hint="--chamber") from None
+        changes = {k: v * 1e-6 for k, v in (("radius", radius_um), ("depth", depth_um),
+                                              ("thickness", thickness_um)) if v is not None}
+        if concentration_molar is not None:
+            changes["concentration"] = concentration_molar * 1000.0
+        if changes:
+            ch = paper_chamber(preset, **changes)
+        return ch
+    if not any(given):
+        return None
+    if not all(given):
+        raise typer.BadParameter("give all three of --chamber-radius-um, --chamber-depth-um, "
+                                 "--membrane-thickness-um (or a --chamber preset)", param_hint="--chamber-radius-um")
+    try:
+        return Chamber(radius=radius_um * 1e-6, depth=depth_um * 1e-6, thickness=thickness_um * 1e-6,
+                       concentration=(concentration_molar if concentration_molar is not None else 3.0) * 1000.0)
+    except ValueError as err:
+        raise typer.BadParameter(str(err), param_hint="--chamber-radius-um") from None
+
+
+@app.command()
+def extract(
+    source: Annotated[Path, typer.Argument(help="Series: multi-page TIFF/OME-TIFF, CZI, or a folder of images.")],
+    out: Annotated[Path, typer.Argument(help="Output dataset: *.nc (netCDF) or *.zarr.")],
+    pixel_size_um: Annotated[float | None, typer.Option(help="Pixel size (um/px) when the files carry none.")] = None,
+    frame_interval_min: Annotated[float | None, typer.Option(help="Minutes between frames when the files carry "
+                                                                  "no timestamps.")] = None,
+    chamber: Annotated[str | None, typer.Option(help="Paper chamber preset: reference, small_radius, "
+                                                     "thick_membrane, low_concentration.")] = None,
+    chamber_radius_um: Annotated[float | None, typer.Option(help="Chamber radius a (um).")] = None,
+    chamber_depth_um: Annotated[float | None, typer.Option(help="Chamber depth h (um).")] = None,
+    membrane_thickness_um: Annotated[float | None, typer.Option(help="Membrane thickness l0 (um).")] = None,
+    concentration_molar: Annotated[float | None, typer.Option(help="Initial salt concentration C0 (M).")] = None,
+    bulge_direction: Annotated[str, typer.Option(help="Direction the dome grows: auto, up, down, left, right.")]
+    = "auto",
+    chamber_region: Annotated[int | None, typer.Option(help="Which well when several are in view "
+                                                            "(index from the left of the bulge-up view).")] = None,
+    errors: Annotated[str, typer.Option(help="flag: keep unmeasurable frames flagged; raise: stop.")] = "flag",
+    progress: Annotated[bool, typer.Option(help="Show a progress bar.")] = True,
+    as_json: Annotated[bool, typer.Option("--json", help="Print the summary as JSON.")] = False,
+):
+    """Extract bulge profiles, volumes, areas and rim radii from a micrograph series into a dataset."""
+    from osmobulge.imaging.extract import extract as _extract
+    from osmobulge.imaging.extract import save_extraction
+
+    suffix = out.suffix.lower()
+    if suffix not in OUTPUT_SUFFIXES:
+        raise typer.BadParameter(f"{str(out)!r} has suffix {suffix!r}; choose one of {OUTPUT_SUFFIXES}",
+                                 param_hint="OUT")
+    if bulge_direction not in DIRECTIONS:
+        raise typer.BadParameter(f"{bulge_direction!r} is not one of {DIRECTIONS}", param_hint="--bulge-direction")
+    if errors not in ERRORS:
+        raise typer.BadParameter(f"{errors!r} is not one of {ERRORS}", param_hint="--errors")
+    if not source.exists():
+        raise typer.BadParameter(f"{str(source)!r} does not exist", param_hint="SOURCE")
+    ch = _chamber(chamber, chamber_radius_um, chamber_depth_um, membrane_thickness_um, concentration_molar)
+    try:
+        ds = _extract(
+            source,
+            pixel_size=None if pixel_size_um is None else pixel_size_um * 1e-6,
+            frame_interval=None if frame_interval_min is None else frame_interval_min * 60.0,
+            chamber=ch,
+            bulge_direction=bulge_direction,
+            chamber_region=chamber_region,
+            errors=errors,
+            progress=progress and not as_json,
+        )
+    except (ValueError, RuntimeError) as err:
+        typer.echo(f"error: {err}", err=True)
+        raise typer.Exit(2) from None
+    save_extraction(ds, out)
+    flags = {str(f): int((ds.flag == f).sum()) for f in sorted(set(ds.flag.values.tolist()))}
+    ok = ds.flag == "ok"
+    summary = {
+        "source": str(source),
+        "out": str(out),
+        "frames": int(ds.sizes["time"]),
+        "flags": flags,
+        "pixel_size_m": float(ds.attrs["pixel_size"]),
+        "bulge_direction": ds.attrs["bulge_direction"],
+        "volume_max_m3": float(ds.volume.where(ok).max()) if ok.any() else None,
+        "vtilde_max": float(ds.vtilde.where(ok).max()) if ok.any() else None,
+        "rim_radius_first_m": float(ds.rim_radius[0]),
+        "prestretch_c1": float(ds.attrs["prestretch_c1"]),
+        "prestretch_c2": float(ds.attrs["prestretch_c2"]),
+    }
+    summary = {k: (None if isinstance(v, float) and v != v else v) for k, v in summary.items()}  # NaN -> null
+    if as_json:
+        typer.echo(json.dumps(summary))
+        return
+    from rich.console import Console
+    from rich.table import Table
+
+    table = Table(title=f"{summary['frames']} frames -> {out}")
+    table.add_column("quantity")
+    table.add_column("value", justify="right")
+    for k, v in summary.items():
+        if k in ("source", "out", "frames"):
+            continue
+        table.add_row(k, json.dumps(v) if isinstance(v, dict) else (f"{v:.6g}" if isinstance(v, float) else str(v)))
+    Console().print(table)
