@@ -583,16 +583,26 @@ def _read_pil(path, grey):
 class _FolderBackend:
     kind = "folder"
 
-    def __init__(self, folder, grey, order):
-        self.folder, self.grey = Path(folder), grey
-        self.source = str(self.folder)
-        files = [
-            p
-            for p in self.folder.iterdir()
-            if p.is_file() and not p.name.startswith(".") and p.suffix.lower() in IMAGE_EXTENSIONS
-        ]
-        if not files:
-            raise ValueError(f"{self.folder} holds no image files ({', '.join(IMAGE_EXTENSIONS)})")
+    def __init__(self, folder, grey, order, files=None):
+        """A folder of single-frame images, or an explicit list of such files (e.g. a glob's matches)."""
+        self.grey = grey
+        if files is None:
+            self.folder = Path(folder)
+            self.source = str(self.folder)
+            files = [
+                p
+                for p in self.folder.iterdir()
+                if p.is_file() and not p.name.startswith(".") and p.suffix.lower() in IMAGE_EXTENSIONS
+            ]
+            if not files:
+                raise ValueError(f"{self.folder} holds no image files ({', '.join(IMAGE_EXTENSIONS)})")
+        else:
+            files = [Path(f) for f in files]
+            for f in files:
+                if not f.is_file():
+                    raise FileNotFoundError(f"no such image file: {f}")
+            self.folder = Path(os.path.commonpath([str(f.parent) for f in files]))
+            self.source = f"{len(files)} files in {self.folder}"
         files = _natsorted(files)
         self.bad = []
         probes = []
@@ -915,6 +925,11 @@ class FrameSeries(Sequence):
 
 
 def _backend_for(source, grey, order, channel):
+    if isinstance(source, list | tuple) and source and all(isinstance(f, str | os.PathLike) for f in source):
+        # a list of files (e.g. the matches of a frames glob): one frame per file, natural order
+        if len(source) == 1:
+            return _backend_for(source[0], grey, order, channel)
+        return _FolderBackend(None, grey, order, files=source)
     if not isinstance(source, (str, os.PathLike)):
         return _ArrayBackend(source, grey)
     path = Path(source)
@@ -966,7 +981,7 @@ def open_series(
 
     Parameters
     ----------
-    source : str, Path or ndarray of shape (T, H, W)
+    source : str, Path, sequence of paths, or ndarray of shape (T, H, W)
         A multi-page TIFF/OME-TIFF, a CZI file, a folder of TIFF/PNG/JPEG
         images, one image file, or frames in memory.
     pixel_size : float, optional, m/px

@@ -163,6 +163,19 @@ def test_natural_order_without_timestamps(tmp_path, frames8):
         np.testing.assert_array_equal(s[2], frames8[0])
 
 
+def test_list_of_files_like_a_glob(tmp_path, frames8):
+    """A frames glob's matches (experiment.toml `frames = "frames/*.png"`) open as a series."""
+    for k in (10, 2, 1, 3):
+        _png(tmp_path / f"frame{k}.png", frames8[k % 5])
+    files = sorted(tmp_path.glob("frame*.png"))[:3]  # frame1, frame10, frame2 in plain sort
+    with open_series([str(f) for f in files], pixel_size=PX, frame_interval=60.0) as s:
+        assert s.names == ["frame1.png", "frame2.png", "frame10.png"]  # natural order
+        np.testing.assert_array_equal(s[1], frames8[2])
+        np.testing.assert_allclose(s.timestamps, [0, 60, 120])
+    with pytest.raises(FileNotFoundError, match="no such image file"):
+        open_series([files[0], tmp_path / "missing.png"], pixel_size=PX, frame_interval=60.0)
+
+
 def test_timestamp_order_wins_over_names(tmp_path, frames8):
     t0 = dt.datetime(2024, 5, 1, 12, 0, 0)
     # names in reverse of the acquisition order
