@@ -203,11 +203,13 @@ def main():
     ap.add_argument("--frames", type=int, default=500, help="frames of the long series of the memory test")
     ap.add_argument("--speed-frames", type=int, default=40, help="frames of the speed test")
     ap.add_argument("--skip-accuracy", action="store_true")
+    ap.add_argument("--skip-speed", action="store_true", help="skip the speed and memory part")
     args = ap.parse_args()
     print(f"# osmobulge imaging benchmark ({_pin_one_cpu()}; load average {os.getloadavg()[0]:.2f})")
     if not args.skip_accuracy:
         accuracy(args.quick)
-    speed_and_memory(args.speed_frames, 200 if args.quick else args.frames, args.quick)
+    if not args.skip_speed:
+        speed_and_memory(args.speed_frames, 200 if args.quick else args.frames, args.quick)
 
 
 if __name__ == "__main__":

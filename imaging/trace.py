@@ -260,9 +260,16 @@ class ChamberTracer:
         x0 = g.line.x0
         us = np.arange(-x0 + 6, w - x0 - 6, 3.0)
         keep = np.ones(us.shape, bool)
-        margin = 0.45 * g.rim_radius + g.thickness
-        for wl in (g.well, *g.others):
-            keep &= ~((us > wl.u_left - margin) & (us < wl.u_right + margin))
+        wells = sorted((g.well, *g.others), key=lambda wl: wl.u_left)
+        for k, wl in enumerate(wells):
+            # keep clear of the rims (domes' feet, delaminated flaps), but never more than 30 % of the
+            # surface between two wells (close neighbours); later frames also drop the columns under
+            # the last dome's overhang (measure_geometry)
+            gl = wl.u_left - wells[k - 1].u_right if k > 0 else np.inf
+            gr = wells[k + 1].u_left - wl.u_right if k + 1 < len(wells) else np.inf
+            ml = min(0.45 * g.rim_radius + g.thickness, 0.3 * gl)
+            mr = min(0.45 * g.rim_radius + g.thickness, 0.3 * gr)
+            keep &= ~((us > wl.u_left - ml) & (us < wl.u_right + mr))
         if keep.sum() < 12:  # narrow field: use what lies outside our own well at least
             keep = (us < g.well.u_left - g.thickness) | (us > g.well.u_right + g.thickness)
         return us[keep]
