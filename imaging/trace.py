@@ -722,9 +722,19 @@ class ChamberTracer:
             vals.append(float((water - band) / den) if np.isfinite(den) and abs(den) > 0 else np.nan)
         fig["rim_contact"] = float(min(vals))
         # sustained gap to another membrane beyond the band, both sides of the dome
-        fig["neighbour_gap"] = self._neighbour_gap(view, g, tr)
+        fig["neighbour_gap"] = self._neighbour_gap(view, g, tr) if self._neighbour_possible(view, g, tr) else np.inf
         fig["residual_rms"] = tr["residual_rms"]
         return fig
+
+    def _neighbour_possible(self, view, g, tr):
+        """Could another bulge reach the dome?  A well within reach, or the dome near the field's edge."""
+        reach = float(np.max(np.abs(tr["u"]))) + 2.5 * g.rim_radius
+        if any(min(abs(wl.u_left), abs(wl.u_right)) < reach for wl in g.others):
+            return True
+        pts = g.line.point(tr["u"], tr["z"])
+        h, w = view.shape
+        margin = 0.5 * g.rim_radius
+        return bool(pts[:, 0].min() < margin or pts[:, 0].max() > w - margin or pts[:, 1].min() < margin)
 
     def _neighbour_gap(self, view, g, tr):
         """Gap (px) between the dome's band and the nearest *other* long membrane (a neighbour's bulge).
