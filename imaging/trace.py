@@ -109,7 +109,16 @@ class TraceSettings:
     max_drift: float = 40.0
     well_membrane_flag: float = 0.01
 
+    def __post_init__(self):
+        for k, v in self.__dict__.items():
+            if not (isinstance(v, int | float) and np.isfinite(v) and v > 0):
+                raise ValueError(f"TraceSettings.{k} must be a positive number (px or fraction), got {v!r}")
+        if self.sample_step > 1.0 or self.station_step > 4.0:
+            raise ValueError(f"sample_step must be <= 1 px and station_step <= 4 px, got {self.sample_step!r}, "
+                             f"{self.station_step!r}")
+
     def to_attrs(self) -> dict:
+        """netCDF-safe attrs, prefixed ``trace_``."""
         return {f"trace_{k}": float(v) for k, v in self.__dict__.items()}
 
 

@@ -138,6 +138,10 @@ def test_tracer_validation():
         ChamberTracer(s.frames[0], bulge_direction="sideways")
     with pytest.raises(ValueError, match="2-D"):
         ChamberTracer(s.frames)
+    with pytest.raises(ValueError, match="search"):
+        TraceSettings(search=-1.0)
+    with pytest.raises(ValueError, match="sample_step"):
+        TraceSettings(sample_step=2.0)
     tracer = ChamberTracer(s.frames[0], settings=TraceSettings(search=25.0))
     with pytest.raises(ValueError, match="shape"):
         tracer.process(s.frames[0][:-1], 1)
