@@ -35,6 +35,7 @@ Layout::
 from __future__ import annotations
 
 import json
+import os
 import time
 from pathlib import Path
 
@@ -131,18 +132,20 @@ def _write_chamber(folder: Path, condition: str, k: int, seed: int) -> dict:
     with atomic_path(folder / "truth.nc") as tmp:
         truth.to_netcdf(tmp, engine="h5netcdf")
     name = f"{condition}-{k}"
-    atomic_write_text(folder / "experiment.toml",
-                      _toml(name, condition, material_name, a, h, l0, c0, truth["time"].values))
     if delaminated:
         from osmobulge.experiments.curation import exclude_frame
 
         exclude_frame(folder, delaminated[0], "delaminated", "membrane lifted off the rim (demo: rendered so)",
-                      by="osmobulge demo")
+                      by="osmobulge demo", force=True)
+    # written last: a chamber without experiment.toml is rendered again by the next run
+    atomic_write_text(folder / "experiment.toml",
+                      _toml(name, condition, material_name, a, h, l0, c0, truth["time"].values))
     return {"name": name, "path": str(folder), "frames": int(series.frames.shape[0]),
             "vtilde_end": float(truth["vtilde"].values[-1])}
 
 
-def write_demo_campaign(directory, *, chambers: int = 2, force: bool = False, progress: bool = False) -> list[Path]:
+def write_demo_campaign(directory, *, chambers: int = 2, force: bool = False, progress: bool = False,
+                        workers: int | None = 1) -> list[Path]:
     """Write the synthetic campaign (frames, experiment.toml, curation, truth) into ``directory``.
 
     Parameters
@@ -153,6 +156,10 @@ def write_demo_campaign(directory, *, chambers: int = 2, force: bool = False, pr
     force : bool
         Rewrite chambers that exist already (otherwise they are kept, so a
         second ``osmobulge demo`` only re-runs what changed: nothing).
+    progress : bool
+        A progress bar (stderr).
+    workers : int, optional
+        Chambers rendered in parallel (local processes; None: one per CPU).
 
     Returns
     -------
@@ -168,22 +175,33 @@ def write_demo_campaign(directory, *, chambers: int = 2, force: bool = False, pr
         for k in range(1, chambers + 1):
             folder = directory / condition / f"chamber-{k}"
             jobs.append((folder, condition, k, 1000 * ci + k))
-    folders = []
+    folders = [job[0] for job in jobs]
+    todo = [job for job in jobs if force or not (job[0] / "experiment.toml").exists()]
     from contextlib import nullcontext
 
     bar = nullcontext()
     if progress:
+        from rich.console import Console
         from rich.progress import Progress
 
-        bar = Progress(transient=True)
+        bar = Progress(console=Console(stderr=True), transient=True)
     with bar as prog:
-        task = prog.add_task("rendering demo frames", total=len(jobs)) if progress else None
-        for folder, condition, k, seed in jobs:
-            if force or not (folder / "experiment.toml").exists():
-                _write_chamber(folder, condition, k, seed)
-            folders.append(folder)
-            if progress:
-                prog.update(task, advance=1)
+        task = prog.add_task("rendering demo frames", total=len(todo)) if progress else None
+        n = max(1, min(workers or os.cpu_count() or 1, len(todo)))
+        if n == 1:
+            for job in todo:
+                _write_chamber(*job)
+                if progress:
+                    prog.update(task, advance=1)
+        else:
+            import multiprocessing
+            from concurrent.futures import ProcessPoolExecutor, as_completed
+
+            with ProcessPoolExecutor(max_workers=n, mp_context=multiprocessing.get_context("spawn")) as pool:
+                for fut in as_completed([pool.submit(_write_chamber, *job) for job in todo]):
+                    fut.result()
+                    if progress:
+                        prog.update(task, advance=1)
     truth = {}
     for m in ("PDMS", "PEO_PDMS"):
         law = _law(m)
@@ -216,6 +234,7 @@ def run_demo(directory, *, chambers: int = 2, workers: int | None = None, schedu
     -------
     dict
         ``n_experiments``, ``seconds`` (wall time), ``exit_code``,
+        ``steps_done``/``steps_skipped`` (up-to-date steps are skipped),
         ``campaign_report`` (path), ``recovery``: per material the campaign's
         P_w(1) (double-exponential fit through the ODE), the truth and the
         relative error; also written to ``DIR/demo-summary.json``.
@@ -224,7 +243,8 @@ def run_demo(directory, *, chambers: int = 2, workers: int | None = None, schedu
 
     t0 = time.perf_counter()
     directory = Path(directory)
-    folders = write_demo_campaign(directory, chambers=chambers, force=force, progress=progress)
+    folders = write_demo_campaign(directory, chambers=chambers, force=force, progress=progress,
+                                  workers=1 if scheduler == "serial" else workers)
     t_write = time.perf_counter() - t0
     batch = run_batch(folders, ("process", "fit", "report"), scheduler=scheduler, workers=workers, force=force,
                       progress=progress)
@@ -244,6 +264,8 @@ def run_demo(directory, *, chambers: int = 2, workers: int | None = None, schedu
         "n_experiments": len(folders), "n_ok": len(ok), "exit_code": batch.exit_code,
         "seconds": time.perf_counter() - t0, "seconds_rendering": t_write, "seconds_batch": batch.seconds,
         "scheduler": batch.scheduler, "campaign_report": camp.get("report"), "recovery": recovery,
+        "steps_done": sum(st.status == "done" for o in batch.outcomes for st in o.steps),
+        "steps_skipped": sum(st.status == "skipped" for o in batch.outcomes for st in o.steps),
         "failed": [{"path": o.path, "error": o.error} for o in batch.outcomes if o.status != "ok"],
     }
     atomic_write_text(directory / "demo-summary.json", json.dumps(summary, indent=1, default=str) + "\n")

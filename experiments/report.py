@@ -167,13 +167,22 @@ def _var(ds, *names):
     return None
 
 
-def plot_volume_ratio(fits, *, title: str = ""):
+def plot_volume_ratio(fits, *, title: str = "", curated=None):
     """V/V0(t) with each fitted model (fine curves) and the residuals below.
+
+    The constant linear-elastic model is drawn solid inside its window
+    (V/V0 up to ``linear_window_volume_ratio``, the only data it was fitted to)
+    and dashed beyond; its residuals are shown inside the window only.
 
     Parameters
     ----------
     fits : xarray.Dataset
         ``fits.nc`` content (:func:`osmobulge.experiments.runs.fit_observations`).
+    title : str
+    curated : xarray.Dataset, optional
+        The extraction after :func:`~osmobulge.experiments.curation.apply_curation`:
+        frames not used by the fits (excluded by a person, flagged, before the
+        time origin) are drawn as red crosses.
 
     Returns
     -------
@@ -184,21 +193,44 @@ def plot_volume_ratio(fits, *, title: str = ""):
     t = fits["time"].values / 3600.0
     v = fits["volume_ratio"].values
     ci = fits["chamber_index"].values.astype(int)
+    window = float(fits.attrs.get("linear_window_volume_ratio", np.inf))
     markers = "osD^v<>p*h"
     for c in np.unique(ci):
         sel = ci == c
         ax.plot(t[sel], v[sel], markers[c % len(markers)], ms=4, mfc="none", color="k",
-                label="data" if c == 0 else None)
+                label="data (used by the fits)" if c == 0 else None)
+    if curated is not None and "kept" in curated and "volume_ratio" in curated:
+        vr = curated["volume_ratio"]
+        vr = vr.transpose("time", ...) if "chamber" in vr.dims else vr
+        drop = ~np.asarray(curated["kept"].values, bool)
+        vals = np.asarray(vr.values, float).reshape(curated.sizes["time"], -1)
+        tt = np.asarray(curated["time"].values, float) / 3600.0
+        if drop.any():
+            ax.plot(np.repeat(tt[drop], vals.shape[1]), vals[drop].ravel(), "x", color="#c22", ms=6,
+                    label="not used (excluded, flagged or before t = 0)")
     if "model" in fits.coords:
         for k, m in enumerate(fits["model"].values):
             m = str(m)
             color = _MODEL_COLORS.get(m)
+            linear = m == "constant_linear"
             for c in range(fits.sizes.get("chamber", 0)):
-                ax.plot(fits["fine_time"].values[c] / 3600.0, fits["fine_volume_ratio"].values[k, c], "-",
-                        color=color, lw=1.6, label=_MODEL_LABELS.get(m, m) if c == 0 else None)
+                ft = fits["fine_time"].values[c] / 3600.0
+                fv = fits["fine_volume_ratio"].values[k, c]
+                inside = fv <= window if linear else np.ones(fv.shape, bool)
+                ax.plot(np.where(inside, ft, np.nan), fv, "-", color=color, lw=1.6,
+                        label=_MODEL_LABELS.get(m, m) if c == 0 else None)
+                if linear and (~inside).any():
+                    last = max(int(np.argmax(~inside)) - 1, 0)
+                    out = ~inside
+                    out[last] = True
+                    ax.plot(np.where(out, ft, np.nan), fv, "--", color=color, lw=0.9,
+                            label="(linear model beyond its window)" if c == 0 else None)
             r = fits["residual"].values[k]
-            axr.plot(t, r, "o", ms=3, color=color)
+            use = v <= window if linear else np.ones(v.shape, bool)
+            axr.plot(t[use], r[use], "o", ms=3, color=color)
     axr.axhline(0, color="0.5", lw=0.8)
+    if np.isfinite(window) and "model" in fits.coords and "constant_linear" in [str(m) for m in fits["model"].values]:
+        ax.axhline(window, color=_MODEL_COLORS["constant_linear"], lw=0.6, ls=":")
     ax.set_ylabel("V/V0")
     axr.set_ylabel("data - model")
     axr.set_xlabel("time (h)")
@@ -287,75 +319,90 @@ def plot_prestretch(extraction):
     return fig
 
 
-def _read_frame(path: Path):
-    suffix = path.name.lower()
-    if suffix.endswith((".tif", ".tiff")):
-        import tifffile
+def _frame_images(exp, positions):
+    """Frames at these positions of the extraction's time axis (read with the process step's reader)."""
+    import dask
 
-        img = tifffile.imread(path)
-        return img if img.ndim == 2 else img[0]
-    import matplotlib.image as mpimg
+    from osmobulge.experiments.runs import open_experiment_frames
 
-    img = mpimg.imread(path)
-    return img if img.ndim == 2 else img[..., :3].mean(axis=-1)
+    ef = open_experiment_frames(exp)
+    with dask.config.set(scheduler="synchronous"):
+        return [np.asarray(ef.frames[int(i)]) for i in positions]
 
 
-def _frame_images(exp, indices):
-    """Frames by index: from the reader of osmobulge.imaging.io when present, else tifffile/matplotlib."""
-    files = exp.frame_files()
-    if len(files) > 1:
-        return [_read_frame(files[i]) for i in indices]
-    try:
-        from osmobulge.imaging import io as imio
-
-        seq = imio.read_series(files[0]) if hasattr(imio, "read_series") else None
-        if seq is not None:
-            return [np.asarray(seq[i]) for i in indices]
-    except Exception:  # noqa: BLE001
-        pass
-    import tifffile
-
-    with tifffile.TiffFile(files[0]) as tf:
-        return [tf.pages[i].asarray() for i in indices]
+def _profile_pixels(extraction, i: int) -> list:
+    """``[(rows, cols), ...]`` of the traced profile(s) of entry ``i`` in frame pixels (one per chamber)."""
+    if "profile_row" not in extraction.variables or "profile_col" not in extraction.variables:
+        return []
+    r = extraction["profile_row"].isel(time=i)
+    c = extraction["profile_col"].isel(time=i)
+    if "chamber" in r.dims:
+        r, c = r.transpose("chamber", ...), c.transpose("chamber", ...)
+        return [(np.asarray(r.values[k], float), np.asarray(c.values[k], float)) for k in range(r.sizes["chamber"])]
+    return [(np.asarray(r.values, float), np.asarray(c.values, float))]
 
 
-def _profile_pixels(extraction, i: int, pixel_size: float | None):
-    """(rows, cols) of the traced profile of entry ``i`` in image pixels, or None."""
-    for rname, cname, scale in (("profile_row", "profile_col", 1.0), ("midline_row", "midline_col", 1.0),
-                                ("profile_y", "profile_x", None)):
-        if rname in extraction.variables and cname in extraction.variables:
-            r = np.asarray(extraction[rname].isel(time=i).values, float).ravel()
-            c = np.asarray(extraction[cname].isel(time=i).values, float).ravel()
-            if scale is None:
-                if not pixel_size:
-                    return None
-                r, c = r / pixel_size, c / pixel_size
-            return r, c
-    return None
+def _entry_str(extraction, name: str, i: int, k: int) -> str:
+    if name not in extraction.variables:
+        return ""
+    v = extraction[name].isel(time=i)
+    if "chamber" in v.dims:
+        v = v.isel(chamber=k)
+    return str(np.ravel(v.values)[0])
 
 
-def plot_frame_strip(exp, extraction, *, n: int = 6):
-    """A strip of frames with the traced profile overlaid (manual profiles in another colour)."""
+def plot_frame_strip(exp, extraction, *, n: int = 6, crop: bool = True):
+    """A strip of frames with the traced profile(s) overlaid (manual profiles in red).
+
+    Parameters
+    ----------
+    exp : Experiment
+    extraction : xarray.Dataset
+        ``results/extraction.nc`` (``profile_row``/``profile_col`` in frame pixels).
+    n : int
+        Frames shown, evenly spread over the series.
+    crop : bool
+        Zoom on the traced domes (with a margin) instead of the whole frame.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
     plt = _plt()
     nt = extraction.sizes["time"]
     idx = np.unique(np.linspace(0, nt - 1, min(n, nt)).round().astype(int))
     frames_idx = (np.asarray(extraction["frame"].values).astype(int)[idx] if "frame" in extraction.variables
                   else idx)
-    images = _frame_images(exp, list(frames_idx))
-    fig, axes = plt.subplots(1, len(idx), figsize=(2.3 * len(idx), 2.6))
+    images = _frame_images(exp, list(idx))
+    # one zoom window for every panel: all traced points of the shown frames, plus a margin
+    window = None
+    if crop:
+        traced = [rc for i in idx for rc in _profile_pixels(extraction, int(i))]
+        rows = np.concatenate([rc[0] for rc in traced]) if traced else np.array([])
+        cols = np.concatenate([rc[1] for rc in traced]) if traced else np.array([])
+        ok = np.isfinite(rows) & np.isfinite(cols)
+        if ok.sum() > 10:
+            h, w = images[0].shape[:2]
+            m = 0.25 * max(np.ptp(rows[ok]), np.ptp(cols[ok]), 20.0)
+            window = (max(0, rows[ok].min() - m), min(h, rows[ok].max() + m),
+                      max(0, cols[ok].min() - m), min(w, cols[ok].max() + m))
+    ncols = len(idx)
+    fig, axes = plt.subplots(1, ncols, figsize=(2.4 * ncols, 2.8))
     axes = np.atleast_1d(axes)
-    p = extraction.attrs.get("pixel_size") or exp.imaging.pixel_size
     for ax, i, f, img in zip(axes, idx, frames_idx, images, strict=True):
-        ax.imshow(img, cmap="gray")
-        prof = _profile_pixels(extraction, int(i), p)
-        src = ""
-        if "profile_source" in extraction.variables:
-            src = str(np.ravel(extraction["profile_source"].isel(time=int(i)).values)[0])
-        if prof is not None:
-            ax.plot(prof[1], prof[0], "-", color="#ff3b30" if src == "manual" else "#00d0ff", lw=1.0)
-        flag = str(np.ravel(extraction["flag"].isel(time=int(i)).values)[0]) if "flag" in extraction else ""
+        ax.imshow(img, cmap="gray", interpolation="nearest")
+        flags = []
+        for k, (r, c) in enumerate(_profile_pixels(extraction, int(i))):
+            manual = _entry_str(extraction, "profile_source", int(i), k) == "manual"
+            ax.plot(c, r, "-", color="#ff3b30" if manual else "#00d0ff", lw=0.9, alpha=0.85)
+            flag = _entry_str(extraction, "flag", int(i), k)
+            if flag and flag != "ok":
+                flags.append(flag)
+        if window is not None:
+            ax.set_xlim(window[2], window[3])
+            ax.set_ylim(window[1], window[0])
         t = float(extraction["time"].values[i]) / 3600.0
-        ax.set_title(f"frame {f}, {t:.1f} h" + (f"\n{flag}" if flag and flag != "ok" else ""), fontsize=8)
+        ax.set_title(f"frame {f}, {t:.1f} h" + (f"\n{', '.join(sorted(set(flags)))}" if flags else ""), fontsize=8)
         ax.set_axis_off()
     fig.tight_layout()
     return fig
@@ -395,7 +442,7 @@ def write_experiment_report(exp, path) -> Path:
     import xarray as xr
 
     from osmobulge import __version__
-    from osmobulge.experiments.curation import curation_summary, load_curation
+    from osmobulge.experiments.curation import apply_curation, curation_summary, load_curation
     from osmobulge.experiments.runs import code_version, read_state
 
     results = exp.results_dir
@@ -430,13 +477,16 @@ def write_experiment_report(exp, path) -> Path:
 
     rep.h2("Frames and traced profiles")
     try:
-        rep.figure(plot_frame_strip(exp, extraction), "Frames with the traced membrane profile "
-                   "(cyan: automatic, red: manual).")
+        rep.figure(plot_frame_strip(exp, extraction), "Frames (zoomed on the chamber) with the traced membrane "
+                   "midline (cyan: automatic, red: manual profile); the title names the automatic flag if any.")
     except Exception as err:  # noqa: BLE001 - a report is still useful without the strip
         rep.note(f"frame strip unavailable: {type(err).__name__}: {err}", "warn")
 
     rep.h2("Volume ratio V/V0(t) and fits")
-    rep.figure(plot_volume_ratio(fits), "Observed V/V0 (kept frames) with each fitted model; residuals below.")
+    curated = apply_curation(extraction, cur)
+    rep.figure(plot_volume_ratio(fits, curated=curated),
+               "Observed V/V0 with each fitted model (the linear-elastic one is fitted up to the dotted "
+               "line only); residuals below. Red crosses: frames the fits do not use.")
     rep.h2("Rim pre-stretch")
     rep.figure(plot_prestretch(extraction), "lambda_pre(Vtilde): rim radius / a with the quadratic through (0, 1) "
                "(supplement Sec 5.7).")

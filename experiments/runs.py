@@ -340,7 +340,8 @@ def _closure(wanted: Sequence[str], pipeline: dict[str, Step]) -> list[str]:
 
 
 def run_experiment(path, steps: Sequence[str] = STEPS, *, force: bool | Sequence[str] = False,
-                   options: dict | None = None, pipeline=None, errors: str = "ignore") -> ExperimentOutcome:
+                   options: dict | None = None, pipeline=None, errors: str = "ignore",
+                   progress: Callable | None = None) -> ExperimentOutcome:
     """Bring the requested steps of one experiment up to date.
 
     Steps whose prerequisites are missing or stale run those first; a step whose
@@ -361,10 +362,16 @@ def run_experiment(path, steps: Sequence[str] = STEPS, *, force: bool | Sequence
     errors : {"ignore", "raise"}
         ``ignore`` (batches): a failure is recorded in the outcome and in
         ``state.json``; ``raise``: re-raise it after recording.
+    progress : callable, optional
+        ``progress(description, done, total)``: called when a step starts
+        (``total`` None) and for every frame the process step reads.
 
     Returns
     -------
     ExperimentOutcome
+        ``status`` is ``invalid`` for bad input (``experiment.toml``, frames
+        that cannot be opened as described: :class:`FramesError`), ``failed``
+        when a step raised anything else.
     """
     if errors not in ("ignore", "raise"):
         raise ValueError(f"errors = {errors!r}: expected 'ignore' or 'raise'")
@@ -405,7 +412,10 @@ def run_experiment(path, steps: Sequence[str] = STEPS, *, force: bool | Sequence
                             and _outputs_ok(results, rec)):
                         out.steps.append(StepOutcome(name, "skipped", summary=rec.get("summary", {})))
                         continue
-                    summary = step.compute(exp, results, options) or {}
+                    if progress is not None:
+                        progress(f"{exp.name}: {name}", 0, None)
+                    opts = {**options, "_progress": progress} if progress is not None else options
+                    summary = step.compute(exp, results, opts) or {}
                     outputs = {o: file_sha256(results / o) for o in step.outputs}
                     state["steps"][name] = {
                         "status": "done", "key": key, "outputs": outputs, "summary": summary,
@@ -423,7 +433,8 @@ def run_experiment(path, steps: Sequence[str] = STEPS, *, force: bool | Sequence
                         "finished": time.strftime("%Y-%m-%dT%H:%M:%S"), "seconds": time.perf_counter() - s0,
                     }
                     _write_state(results, state)
-                    out.status, out.error = "failed", f"{name}: {msg}"
+                    out.status = "invalid" if isinstance(err, FramesError) else "failed"
+                    out.error = f"{name}: {msg}"
                     out.steps.append(StepOutcome(name, "failed", time.perf_counter() - s0, error=msg))
                     if errors == "raise":
                         raise
@@ -486,9 +497,10 @@ class BatchResult:
                 "experiments": [o.to_dict() for o in self.outcomes]}
 
 
-def _run_one(path, steps, force, options, pipeline):
+def _run_one(path, steps, force, options, pipeline, progress=None):
     """Task body (module level: picklable for process pools and dask)."""
-    return run_experiment(path, steps, force=force, options=options, pipeline=pipeline, errors="ignore")
+    return run_experiment(path, steps, force=force, options=options, pipeline=pipeline, errors="ignore",
+                          progress=progress)
 
 
 def _crashed(path, err) -> ExperimentOutcome:
@@ -514,8 +526,10 @@ def run_batch(paths: Sequence, steps: Sequence[str] = STEPS, *, scheduler="proce
     force, options, pipeline
         As in :func:`run_experiment`.
     progress : bool or callable
-        True: a rich progress bar on stderr; a callable is called with each
-        :class:`ExperimentOutcome` as it finishes.
+        True: a rich progress bar on stderr (experiments done; when the
+        experiments run in this process -- ``"serial"``, or a single
+        experiment -- also the current step and its frames); a callable is
+        called with each :class:`ExperimentOutcome` as it finishes.
 
     Returns
     -------
@@ -545,9 +559,12 @@ def run_batch(paths: Sequence, steps: Sequence[str] = STEPS, *, scheduler="proce
 
         if not paths:
             pass
-        elif scheduler == "serial":
+        elif scheduler == "serial" or (scheduler == "processes" and len(paths) == 1):
+            # in this process (a pool of one buys nothing): the bar can follow the steps and frames
             for i, p in enumerate(paths):
-                done(i, _run_one(p, steps, force, options, pipeline))
+                done(i, _run_one(p, steps, force, options, pipeline, getattr(tick, "detail", None)))
+            if scheduler == "processes":
+                label = "processes(in-process)"
         elif scheduler == "processes":
             n = max(1, min(workers or os.cpu_count() or 1, len(paths)))
             _run_pool(paths, n, done, (steps, force, options, pipeline))
@@ -636,17 +653,30 @@ def _progress(progress, total: int):
     if not progress:
         yield lambda outcome: None
         return
+    from rich.console import Console
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
     with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
-                  transient=False) as bar:
+                  console=Console(stderr=True), transient=False) as bar:
         task = bar.add_task("experiments", total=total)
+        sub: list = []
 
         def tick(outcome):
             mark = "ok" if outcome.status == "ok" else outcome.status.upper()
             bar.update(task, advance=1, description=f"{outcome.name or Path(outcome.path).name}: {mark}")
 
-        yield tick
+        def detail(description, done, total_):
+            """Current step / frames of an experiment run in this process."""
+            if not sub:
+                sub.append(bar.add_task(description, total=total_))
+            bar.update(sub[0], description=description, completed=done, total=total_)
+
+        tick.detail = detail
+        try:
+            yield tick
+        finally:
+            if sub:
+                bar.remove_task(sub[0])
 
 
 # ---------------------------------------------------------------------------------------------
@@ -686,7 +716,7 @@ def _fp_report(exp: Experiment, options: dict) -> dict:
 
 
 def _compute_process(exp: Experiment, results: Path, options: dict) -> dict:
-    return process_experiment(exp, results, **options.get("extract", {}))
+    return process_experiment(exp, results, progress=options.get("_progress"), **options.get("extract", {}))
 
 
 def _compute_fit(exp: Experiment, results: Path, options: dict) -> dict:
@@ -705,6 +735,10 @@ def _compute_report(exp: Experiment, results: Path, options: dict) -> dict:
 
 
 # ---- process -----------------------------------------------------------------------------------
+class FramesError(ValueError):
+    """The frames cannot be opened as the experiment describes them (bad input, exit code 2)."""
+
+
 def _netcdf_safe_attrs(attrs: dict) -> dict:
     out = {}
     for k, v in attrs.items():
@@ -734,48 +768,255 @@ def _write_netcdf(ds, path: Path) -> None:
         ds.to_netcdf(tmp, engine="h5netcdf")
 
 
-def process_experiment(exp: Experiment, results: Path, **extract_options) -> dict:
+@dataclass
+class ExperimentFrames:
+    """The frames of an experiment, opened lazily (:func:`open_experiment_frames`).
+
+    Attributes
+    ----------
+    frames : dask.array.Array of shape (T, H, W)
+        One chunk per frame, read when computed.
+    pixel_size : float, m
+    times : ndarray of shape (T,), s
+        Frame clock (from ``experiment.toml`` or the files).
+    frame_index : ndarray of int of shape (T,)
+        Index of each frame in the experiment's frame order
+        (:meth:`~osmobulge.experiments.metadata.Experiment.frame_files`): the
+        frame numbers of ``curation.json``.  Differs from ``arange(T)`` only
+        when unreadable files were skipped.
+    source : str
+    bad_frames : list of (str, str)
+        Files skipped by the reader, with the reason.
+    time_source : str
+        ``"experiment.toml"`` or ``"files"``.
+    """
+
+    frames: object
+    pixel_size: float
+    times: object
+    frame_index: object
+    source: str
+    bad_frames: list
+    time_source: str
+
+
+def _lazy_stack(read, n: int, shape, dtype):
+    import dask
+    import dask.array as da
+
+    parts = [da.from_delayed(dask.delayed(read, pure=False)(j), shape=tuple(shape), dtype=dtype) for j in range(n)]
+    return da.stack(parts)
+
+
+def open_experiment_frames(exp: Experiment, *, on_frame: Callable | None = None) -> ExperimentFrames:
+    """Open the frames of an experiment with :func:`osmobulge.imaging.io.open_series`.
+
+    The pixel size and frame times of ``experiment.toml`` are checked against
+    the files' own metadata (they must agree); ``timestamps = "files"`` takes
+    the times from the files (relative to the first frame).  A glob's
+    matches are one series, in natural file-name order.
+
+    Parameters
+    ----------
+    exp : Experiment
+    on_frame : callable, optional
+        Called with no argument each time a frame is read (progress).
+
+    Returns
+    -------
+    ExperimentFrames
+
+    Raises
+    ------
+    FramesError
+        No readable frame, pixel size or times missing or in conflict with the
+        files, a wrong number of ``timestamps_min``.
+    """
+    import warnings
+
+    import numpy as np
+
+    from osmobulge.imaging.io import open_series
+
+    im = exp.imaging
+    kw: dict = {"pixel_size": im.pixel_size}
+    if not im.timestamps_from_files:
+        if im.timestamps is not None:
+            kw["timestamps"] = np.asarray(im.timestamps, float)
+        elif im.frame_interval is not None:
+            kw["frame_interval"] = float(im.frame_interval)
+    files = exp.frame_files()
+    source = exp.frames_source()
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", UserWarning)  # skipped files are listed in bad_frames
+            series = open_series(source, order="name", **kw)
+    except (ValueError, FileNotFoundError) as err:  # io.MetadataError is a ValueError
+        raise FramesError(f"{exp.path}: frames {im.frames!r}: {err}") from err
+    times = np.asarray(series.timestamps, float)
+    names = list(series.names) if hasattr(series, "names") else []
+    by_name = {f.name: i for i, f in enumerate(files)}
+    if names and len(set(names)) == len(names) and all(n in by_name for n in names):
+        index = np.array([by_name[n] for n in names], int)
+    else:
+        index = np.arange(len(series))
+    shape, dtype = series.shape[1:], series.dtype
+
+    def read(j):
+        frame = np.asarray(series[j])
+        if on_frame is not None:
+            on_frame()
+        return frame
+
+    if times.shape != (len(series),) or not np.all(np.isfinite(times)):
+        raise FramesError(f"{exp.path}: frame times unknown: set [imaging] frame_interval_min or timestamps_min")
+    p = float(series.pixel_size) if series.pixel_size is not None else float("nan")
+    if not np.isfinite(p):
+        raise FramesError(f"{exp.path}: pixel size unknown: set [imaging] pixel_size_um")
+    return ExperimentFrames(
+        frames=_lazy_stack(read, len(series), shape, dtype), pixel_size=p, times=times, frame_index=index,
+        source=str(exp.path / im.frames) if not Path(im.frames).is_absolute() else im.frames,
+        bad_frames=list(getattr(series, "bad_frames", [])),
+        time_source="files" if im.timestamps_from_files else "experiment.toml")
+
+
+def _manual_for_region(manual: dict, regions, p: float) -> list[dict]:
+    """Split the manual profiles by chamber region; points shifted into each region's crop (m)."""
+    import numpy as np
+
+    if not regions:
+        return [{f: np.asarray(v["points"], float) for f, v in manual.items()}]
+    out = [{} for _ in regions]
+    names = [r["name"] for r in regions]
+    for f, v in manual.items():
+        pts = np.asarray(v["points"], float)
+        if v.get("chamber") is not None:
+            if v["chamber"] not in names:
+                raise FramesError(f"manual profile of frame {f}: chamber {v['chamber']!r} is not one of the "
+                                  f"chamber regions {names}")
+            k = names.index(v["chamber"])
+        else:  # the region holding the points' centre
+            col, row = pts.mean(axis=0) / p
+            hits = [i for i, r in enumerate(regions) if r["rows"][0] <= row < r["rows"][1]
+                    and r["cols"][0] <= col < r["cols"][1]]
+            if len(hits) != 1:
+                raise FramesError(f"manual profile of frame {f} lies in {len(hits)} chamber regions: name its "
+                                  "chamber (set_manual_profile(..., chamber=NAME))")
+            k = hits[0]
+        r = regions[k]
+        out[k][f] = pts - np.array([r["cols"][0], r["rows"][0]], float) * p
+    return out
+
+
+def process_experiment(exp: Experiment, results: Path, *, progress: Callable | None = None,
+                       **extract_options) -> dict:
     """The process step: extract the frames -> ``results/extraction.nc``.
+
+    The frames are read lazily (:func:`open_experiment_frames`); each chamber
+    region (``curation.json`` or ``[imaging] chamber_regions``) is cropped and
+    extracted on its own and the datasets are stacked along a ``chamber``
+    dimension.  Manual profiles of ``curation.json`` replace the automatic
+    trace of their frames (``profile_source = "manual"``); the curation file
+    itself is only read.
 
     Parameters
     ----------
     exp : Experiment
     results : pathlib.Path
         The results folder.
+    progress : callable, optional
+        ``progress(description, done, total)`` after every frame read.
     **extract_options
-        Passed to :func:`osmobulge.imaging.extract.extract`.
+        Passed to :func:`osmobulge.imaging.extract.extract` (``settings``,
+        ``errors``, ``n_profile``, ``priors``, ...).
 
     Returns
     -------
     dict
-        ``n_frames``, ``n_flagged``, ``flags`` (count per flag), ``n_manual``.
+        ``n_frames``, ``n_flagged``, ``flags`` (count per flag), ``n_manual``,
+        ``n_chambers``.
     """
+    import dask
     import numpy as np
+    import xarray as xr
 
     from osmobulge.experiments.curation import load_curation
     from osmobulge.imaging.extract import extract
 
     cur = load_curation(exp.path)
     im = exp.imaging
-    regions = cur.chamber_regions if cur.chamber_regions is not None else im.chamber_regions
-    manual = {int(f): np.asarray(v["points"], float) for f, v in cur.manual_profiles.items()}
-    kwargs = {"pixel_size": im.pixel_size, "chamber": exp.chamber.to_chamber(), "frame_interval": im.frame_interval}
-    if im.timestamps is not None:
-        kwargs["timestamps"] = np.asarray(im.timestamps, float)
-    if im.bulge_direction != "auto":
-        kwargs["bulge_direction"] = im.bulge_direction
-    if manual:
-        kwargs["manual_profiles"] = manual
+    regions = list(cur.chamber_regions) if cur.chamber_regions is not None else [dict(r) for r in im.chamber_regions]
+    count = [0, 0]
+
+    def on_frame():
+        count[0] += 1
+        if progress is not None:
+            progress(f"{exp.name}: extracting", count[0], count[1])
+
+    ef = open_experiment_frames(exp, on_frame=on_frame)
+    count[1] = len(ef.times) * max(1, len(regions))
+    p = ef.pixel_size
+    n = len(ef.times)
+    # curation frame numbers -> positions in the series
+    pos = {int(f): i for i, f in enumerate(ef.frame_index)}
+    missing = [f for f in cur.manual_profiles if int(f) not in pos]
+    if missing:
+        raise FramesError(f"manual profiles of frames {missing}: no such frame (the series has {n})")
+    manual = {pos[int(f)]: v for f, v in cur.manual_profiles.items()}
+    per_region = _manual_for_region(manual, regions, p)
+    options = {"progress": False, **extract_options}
+    parts = []
+    for k, region in enumerate(regions or [None]):
+        arr = ef.frames
+        r0 = c0 = 0
+        if region is not None:
+            (r0, r1), (c0, c1) = region["rows"], region["cols"]
+            if r1 > arr.shape[1] or c1 > arr.shape[2]:
+                raise FramesError(f"chamber region {region['name']!r} rows {region['rows']} cols {region['cols']} "
+                                  f"exceeds the frames ({arr.shape[1]} x {arr.shape[2]} px)")
+            arr = arr[:, r0:r1, c0:c1]
+        kwargs = {"pixel_size": p, "frame_interval": 1.0, "chamber": exp.chamber.to_chamber(),
+                  "bulge_direction": im.bulge_direction, "metadata": None, **options}
+        if per_region[k]:
+            kwargs["manual_profiles"] = per_region[k]
+        with dask.config.set(scheduler="synchronous"):  # frames read here, one at a time, never on a cluster
+            ds = extract(arr, **kwargs)
+        # the real frame clock (extract was given a unit interval: it has no timestamps= argument)
+        ds = ds.assign_coords(time=("time", ef.times, {"units": "s", "long_name": "time since the first frame"}),
+                              frame=("time", ef.frame_index, {"long_name": "frame index (curation.json)"}))
+        for v, off in (("profile_col", c0), ("profile_row", r0), ("axis_col", c0), ("axis_row", r0)):
+            if v in ds and off:
+                ds[v] = ds[v] + off
+        if region is not None:
+            ds.attrs.update(region_name=region["name"], region_rows=list(region["rows"]),
+                            region_cols=list(region["cols"]))
+        parts.append(ds)
     if regions:
-        kwargs["chamber_regions"] = [dict(r) for r in regions]
-    kwargs.update(extract_options)
-    ds = extract(exp.frames_source(), **kwargs)
+        per = {}
+        for key in ("prestretch_c1", "prestretch_c2", "prestretch_frames", "reference_radius",
+                    "polarity", "blur_sigma_px", "bulge_direction"):
+            per[key] = [d.attrs.get(key, np.nan) for d in parts]
+        ds = xr.concat(parts, dim="chamber", combine_attrs="override", coords="minimal", compat="override")
+        ds = ds.assign_coords(chamber=("chamber", [r["name"] for r in regions], {"long_name": "chamber region"}))
+        for key, vals in per.items():
+            ds[key] = ("chamber", np.asarray(vals), {"long_name": f"{key} of each chamber region"})
+            ds.attrs.pop(key, None)
+        for key in ("region_name", "region_rows", "region_cols"):
+            ds.attrs.pop(key, None)
+        ds["region_rows"] = (("chamber", "bound"), np.array([r["rows"] for r in regions]), {"units": "px"})
+        ds["region_cols"] = (("chamber", "bound"), np.array([r["cols"] for r in regions]), {"units": "px"})
+        ds = ds.transpose("time", "chamber", ...)
+    else:
+        ds = parts[0]
+    ds.attrs.update(frame_interval=float(np.median(np.diff(ef.times))) if n > 1 else 0.0, source=ef.source,
+                    time_source=ef.time_source,
+                    bad_frames="; ".join(f"{a}: {b}" for a, b in ef.bad_frames) or "none")
     ds.attrs.update(experiment_attrs(exp))
     _write_netcdf(ds, results / "extraction.nc")
-    flags = np.asarray(ds["flag"].values).astype(str).ravel() if "flag" in ds else np.array([], str)
+    flags = np.asarray(ds["flag"].values).astype(str).ravel()
     counts = {str(k): int(v) for k, v in zip(*np.unique(flags, return_counts=True), strict=True)}
     return {"n_frames": int(ds.sizes["time"]), "n_flagged": int(np.sum(flags != "ok")), "flags": counts,
-            "n_manual": len(manual)}
+            "n_manual": len(manual), "n_chambers": max(1, len(regions))}
 
 
 # ---- fit ---------------------------------------------------------------------------------------
@@ -1050,7 +1291,8 @@ def fit_observations(observations, material, *, models=MODELS, analysis=None, la
         inst_ds.attrs = {}
         ds = ds.merge(inst_ds, compat="override")
     ds.attrs.update({"title": f"permeability fits of {label}", "osmobulge_code": code_version(),
-                     "models": ",".join(models), "n_chambers": n_obs})
+                     "models": ",".join(models), "n_chambers": n_obs,
+                     "linear_window_volume_ratio": float(analysis.linear_window_volume_ratio)})
     return {"json": js, "dataset": ds}
 
 

@@ -1,0 +1,204 @@
+"""The real process step (osmobulge.imaging.extract) on synthetic frames with a known truth.
+
+Small frames (160 x 220 px at 2 um/px, a 100 um chamber) so each extraction
+takes about a second.
+"""
+
+import json
+
+import numpy as np
+import pytest
+import tifffile
+import xarray as xr
+
+from osmobulge.experiments.curation import exclude_frame, load_curation, set_manual_profile
+from osmobulge.experiments.metadata import load_experiment
+from osmobulge.experiments.runs import (
+    EXIT_BAD_INPUT,
+    FramesError,
+    open_experiment_frames,
+    read_state,
+    run_batch,
+    run_experiment,
+)
+
+P = 2e-6  # m/px
+SHAPE = (160, 220)
+CHAMBER = (100e-6, 60e-6, 10e-6)
+DT = 600.0
+
+
+def _render(vtilde, seed):
+    from osmobulge.imaging.synthetic import Nuisances, render_series
+
+    return render_series(np.asarray(vtilde, float), chamber=CHAMBER, pixel_size=P, shape=SHAPE,
+                         times=np.arange(len(vtilde)) * DT,
+                         nuisances=Nuisances(noise_sigma=0.01, blur_sigma=1.0, bit_depth=16), seed=seed)
+
+
+def _toml(name, extra=""):
+    return f'''[experiment]
+name = "{name}"
+material = "PDMS"
+
+[chamber]
+radius_um = 100.0
+depth_um = 60.0
+membrane_thickness_um = 10.0
+concentration_M = 3.0
+
+[imaging]
+frames = "frames/*.tif"
+pixel_size_um = 2.0
+frame_interval_min = 10.0
+bulge_direction = "up"
+{extra}
+[analysis]
+models = ["constant_hyperelastic"]
+instantaneous = false
+'''
+
+
+def _write(folder, frames, name="exp", extra=""):
+    (folder / "frames").mkdir(parents=True, exist_ok=True)
+    for i, f in enumerate(frames):
+        tifffile.imwrite(folder / "frames" / f"frame_{i:03d}.tif", f)
+    (folder / "experiment.toml").write_text(_toml(name, extra))
+    return folder
+
+
+def _truth_profile_m(truth, i, height_scale=1.0):
+    """The true midline of frame i, rim to rim, as image coordinates in metres, heights scaled."""
+    col = truth["midline_col"].values[i]  # (side, s): from the axis out to each rim
+    row = truth["midline_row"].values[i]
+    cols = np.r_[col[0][::-1], col[1][1:]]
+    rows = np.r_[row[0][::-1], row[1][1:]]
+    rim = float(truth["rim_y"].values[i])
+    rows = rim - height_scale * (rim - rows)
+    return np.c_[cols, rows] * P
+
+
+def test_process_step_measures_the_truth(tmp_path):
+    series = _render(np.linspace(0, 1.2, 8), seed=1)
+    d = _write(tmp_path / "e", series.frames)
+    out = run_experiment(d, ["process"])
+    assert out.status == "ok", out.error
+    ds = xr.load_dataset(d / "results" / "extraction.nc", engine="h5netcdf")
+    truth = series.truth
+    np.testing.assert_allclose(ds["time"].values, truth["time"].values)
+    assert list(ds["frame"].values) == list(range(8))
+    assert (ds["flag"].values == "ok").all()
+    np.testing.assert_allclose(ds["volume"].values[1:], truth["volume"].values[1:], rtol=0.02)
+    np.testing.assert_allclose(ds["volume_ratio"].values, truth["volume_ratio"].values, rtol=0.01)
+    # the experiment's chamber and metadata are in the attrs; profiles are in frame pixels
+    assert ds.attrs["chamber_radius"] == pytest.approx(CHAMBER[0], rel=1e-9, abs=0)
+    assert ds.attrs["experiment_name"] == "exp"
+    mid = np.nanmax(ds["profile_row"].values[-1])
+    assert mid == pytest.approx(float(truth["rim_y"].values[-1]), abs=3.0)
+    axis = float(np.nanmean(ds["profile_col"].values[-1]))
+    assert axis == pytest.approx(float(truth["axis_x"].values[-1]), abs=3.0)
+
+
+def test_curation_survives_reextraction(tmp_path):
+    """Manual profile + excluded frame, then a frame file changes: extraction re-runs and keeps both."""
+    series = _render(np.linspace(0, 1.2, 8), seed=2)
+    truth = series.truth
+    d = _write(tmp_path / "e", series.frames)
+    scale = 1.25  # the person's profile is deliberately taller than the truth: its volume tells it was used
+    set_manual_profile(d, 3, _truth_profile_m(truth, 3, scale), by="tester")
+    exclude_frame(d, 5, "out_of_focus", "blurred", by="tester")
+    cur_bytes = (d / "curation.json").read_bytes()
+    out = run_experiment(d, ["fit"])
+    assert out.status == "ok", out.error
+
+    def check():
+        ds = xr.load_dataset(d / "results" / "extraction.nc", engine="h5netcdf")
+        assert str(ds["profile_source"].values[3]) == "manual"
+        assert (ds["profile_source"].values[[0, 1, 2, 4, 5, 6, 7]] == "auto").all()
+        assert ds["volume"].values[3] == pytest.approx(scale * truth["volume"].values[3], rel=0.02)
+        assert ds["volume"].values[4] == pytest.approx(truth["volume"].values[4], rel=0.02)
+        fits = json.loads((d / "results" / "fits.json").read_text())
+        assert fits["n_excluded"] == 1 and fits["n_kept"] == 7
+        fnc = xr.load_dataset(d / "results" / "fits.nc", engine="h5netcdf")
+        assert not bool(fnc["kept"].values[5]) and str(fnc["exclusion_reason"].values[5]) == "out_of_focus"
+        return ds
+
+    before = check()
+    # a frame file changes (re-exported with other noise): process must run again
+    frame7 = _render(np.linspace(0, 1.2, 8), seed=99).frames[7]
+    tifffile.imwrite(d / "frames" / "frame_007.tif", frame7)
+    again = run_experiment(d, ["fit"])
+    assert again.status == "ok", again.error
+    assert again.step("process").status == "done" and again.step("fit").status == "done"
+    after = check()
+    assert after["volume"].values[7] != before["volume"].values[7]  # really re-extracted
+    # extraction never writes the curation: same bytes, no new revision in the history
+    assert (d / "curation.json").read_bytes() == cur_bytes
+    assert load_curation(d).revision == 2
+    assert len(list((d / ".curation-history").iterdir())) == 1
+    # nothing changed: everything is skipped
+    third = run_experiment(d, ["fit"])
+    assert [s.status for s in third.steps] == ["skipped", "skipped"]
+
+
+def test_chamber_regions_stack_along_chamber(tmp_path):
+    """One field holding two chambers: each region is extracted on its own and fitted together."""
+    left, right = _render(np.linspace(0, 1.2, 6), seed=3), _render(np.linspace(0, 0.6, 6), seed=4)
+    field = np.concatenate([left.frames, right.frames], axis=2)
+    w = SHAPE[1]
+    regions = (f'chamber_regions = [{{name = "L", rows = [0, {SHAPE[0]}], cols = [0, {w}]}}, '
+               f'{{name = "R", rows = [0, {SHAPE[0]}], cols = [{w}, {2 * w}]}}]\n')
+    d = _write(tmp_path / "two", field, extra=regions)
+    out = run_experiment(d, ["report"])
+    assert out.status == "ok", out.error
+    assert out.step("process").summary["n_chambers"] == 2
+    ds = xr.load_dataset(d / "results" / "extraction.nc", engine="h5netcdf")
+    assert list(ds["chamber"].values) == ["L", "R"] and ds["volume"].dims == ("time", "chamber")
+    np.testing.assert_allclose(ds["volume"].sel(chamber="L").values[1:], left.truth["volume"].values[1:], rtol=0.02)
+    np.testing.assert_allclose(ds["volume"].sel(chamber="R").values[1:], right.truth["volume"].values[1:], rtol=0.03)
+    # profile columns are in the field's pixels: the right chamber's axis is w px further right
+    axis_r = float(np.nanmean(ds["profile_col"].sel(chamber="R").values[-1]))
+    assert axis_r == pytest.approx(w + float(right.truth["axis_x"].values[-1]), abs=3.0)
+    fits = json.loads((d / "results" / "fits.json").read_text())
+    assert fits["chambers"] == ["exp/L", "exp/R"]
+    html = (d / "results" / "report.html").read_text()
+    assert "frame strip unavailable" not in html and html.count("data:image/png;base64,") >= 3
+
+
+def test_glob_subset_and_times_from_files(tmp_path):
+    """A glob picking some files of a folder; timestamps = "files" from each file's DateTime tag."""
+    from osmobulge.imaging.io import write_series
+
+    series = _render(np.linspace(0, 0.5, 5), seed=5)
+    d = tmp_path / "g"
+    t = np.array([0.0, 700.0, 1300.0, 2000.0, 2600.0])
+    write_series(series.frames, d / "frames", fmt="tiff-folder", pixel_size=P, timestamps=t)
+    names = sorted(p.name for p in (d / "frames").iterdir())
+    # another series' frame in the same folder (taken earlier): not picked by the glob, must not shift the times
+    tifffile.imwrite(d / "frames" / "other-chamber.tif", series.frames[0], datetime="2023:12:31 08:00:00")
+    (d / "experiment.toml").write_text(
+        _toml("g").replace('frames = "frames/*.tif"', f'frames = "frames/{names[0][:3]}*.tif"')
+        .replace("frame_interval_min = 10.0", 'timestamps = "files"'))
+    exp = load_experiment(d)
+    assert len(exp.frame_files()) == 5
+    ef = open_experiment_frames(exp)
+    assert ef.frames.shape == (5, *SHAPE) and ef.pixel_size == pytest.approx(P, rel=1e-6, abs=0)
+    np.testing.assert_allclose(ef.times, t, atol=1e-3)
+    np.testing.assert_array_equal(np.asarray(ef.frames[2]), series.frames[2])
+
+
+def test_frames_in_conflict_with_the_toml_are_bad_input(tmp_path):
+    """The files say 2.5 um/px, experiment.toml 2 um/px: exit code 2, named in the error, nothing written."""
+    from osmobulge.imaging.io import write_series
+
+    series = _render(np.linspace(0, 0.5, 4), seed=6)
+    d = tmp_path / "c"
+    write_series(series.frames, d / "frames", fmt="tiff-folder", pixel_size=2.5e-6, timestamps=np.arange(4) * DT)
+    (d / "experiment.toml").write_text(_toml("c"))
+    with pytest.raises(FramesError, match="pixel size"):
+        open_experiment_frames(load_experiment(d))
+    res = run_batch([d], ["process"], scheduler="serial")
+    assert res.exit_code == EXIT_BAD_INPUT and res.outcomes[0].status == "invalid"
+    assert "pixel size" in res.outcomes[0].error
+    assert not (d / "results" / "extraction.nc").exists()
+    assert read_state(d)["steps"]["process"]["status"] == "failed"
