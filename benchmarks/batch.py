@@ -12,6 +12,7 @@ the 2-worker / 1-worker speed-up.
 from __future__ import annotations
 
 import argparse
+import os
 import shutil
 import statistics
 import tempfile
@@ -30,10 +31,19 @@ def main() -> None:
     from osmobulge.experiments.runs import run_batch
 
     root = args.dir or Path(tempfile.mkdtemp(prefix="ob-batch-"))
+    try:
+        _run(root, args, write_demo_campaign, run_batch)
+    finally:
+        if args.dir is None:
+            shutil.rmtree(root, ignore_errors=True)
+
+
+def _run(root, args, write_demo_campaign, run_batch):
     src = root / "source"
     t0 = time.perf_counter()
-    folders = write_demo_campaign(src, chambers=args.chambers)
+    folders = write_demo_campaign(src, chambers=args.chambers, workers=2)
     print(f"wrote {len(folders)} experiments in {time.perf_counter() - t0:.1f} s ({src})")
+    print(f"CPUs: {os.cpu_count()}; load average before: {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
     rows = []
     for workers in (1, 2):
         times = []
@@ -53,6 +63,7 @@ def main() -> None:
     for w, n, s, rate in rows:
         print(f"{w:>7} {n:>11} {s:>9.1f} {rate:>8.2f}")
     print(f"\nspeed-up 2 vs 1 worker: {rows[1][3] / rows[0][3]:.2f}x")
+    print(f"load average after: {' '.join(f'{x:.2f}' for x in os.getloadavg())} (other processes share the CPUs)")
 
 
 if __name__ == "__main__":  # distributed/spawn need the guard
