@@ -1,10 +1,15 @@
 """CLI commands for experiment folders: init, process, fit, report, run, catalog, campaign, demo.
 
-Exit codes (all batch commands)
--------------------------------
-0  every experiment is up to date
+Every command takes ``--quiet/-q`` (nothing on stdout; errors still on stderr)
+and ``--json`` (one JSON document on stdout, also for errors:
+``{"exit_code": N, "error": "..."}``; progress bars off).  Progress bars go to
+stderr.
+
+Exit codes
+----------
+0  every experiment is up to date (init: template written; catalog: experiments found)
 1  some experiments failed in a step (the others' results are intact; re-run to resume)
-2  bad input: no experiment found, invalid experiment.toml, missing frames, bad option
+2  bad input: no experiment found, invalid experiment.toml, frames missing or not as described, bad option
 3  environment: dask.distributed missing or the scheduler cannot be reached
 """
 
@@ -28,7 +33,15 @@ _QUIET = Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar, no
 _JSON = Annotated[bool, typer.Option("--json", help="Print the outcome as JSON (for scripts).")]
 
 
-def _expand(dirs) -> list[Path]:
+def _fail(message: str, code: int, as_json: bool = False):
+    """Print the error (stderr; and as JSON on stdout with ``--json``) and exit with ``code``."""
+    typer.echo(f"error: {message}", err=True)
+    if as_json:
+        typer.echo(json.dumps({"exit_code": code, "error": message}))
+    raise typer.Exit(code)
+
+
+def _expand(dirs, as_json: bool = False) -> list[Path]:
     from osmobulge.experiments.metadata import find_experiments, is_experiment_dir
 
     out: list[Path] = []
@@ -39,13 +52,11 @@ def _expand(dirs) -> list[Path]:
         elif d.is_dir():
             found = find_experiments(d)
             if not found:
-                typer.echo(f"error: {d}: no experiment.toml at or under it (write one with `osmobulge init`)",
-                           err=True)
-                raise typer.Exit(EXIT_BAD_INPUT)
+                _fail(f"{d}: no experiment.toml at or under it (write one with `osmobulge init`)", EXIT_BAD_INPUT,
+                      as_json)
             out.extend(found)
         else:
-            typer.echo(f"error: {d}: not a folder", err=True)
-            raise typer.Exit(EXIT_BAD_INPUT)
+            _fail(f"{d}: not a folder", EXIT_BAD_INPUT, as_json)
     # keep order, drop duplicates
     seen, uniq = set(), []
     for p in out:
@@ -57,21 +68,9 @@ def _expand(dirs) -> list[Path]:
 
 
 def _batch(dirs, steps, *, scheduler, workers, force, quiet, as_json, options=None):
-    from osmobulge.experiments.runs import run_batch
-
-    paths = _expand(dirs)
-    try:
-        res = run_batch(paths, steps, scheduler=scheduler, workers=workers or None, force=force,
-                        options=options, progress=not (quiet or as_json))
-    except ImportError as err:
-        typer.echo(f"error: {err}", err=True)
-        raise typer.Exit(EXIT_ENVIRONMENT) from None
-    except (OSError, TimeoutError) as err:
-        typer.echo(f"error: cannot reach the scheduler {scheduler!r}: {err}", err=True)
-        raise typer.Exit(EXIT_ENVIRONMENT) from None
-    except ValueError as err:
-        typer.echo(f"error: {err}", err=True)
-        raise typer.Exit(EXIT_BAD_INPUT) from None
+    paths = _expand(dirs, as_json)
+    res = _run_batch(paths, steps, scheduler=scheduler, workers=workers, force=force, options=options,
+                     progress=not (quiet or as_json), as_json=as_json)
     if as_json:
         typer.echo(json.dumps(res.to_dict(), default=str))
     elif not quiet:
@@ -81,6 +80,21 @@ def _batch(dirs, steps, *, scheduler, workers, force, quiet, as_json, options=No
             if o.status != "ok":
                 typer.echo(f"{o.path}: {o.status}: {o.error}", err=True)
     raise typer.Exit(res.exit_code)
+
+
+def _run_batch(paths, steps, *, scheduler, workers, force=False, options=None, progress=True, as_json=False):
+    """run_batch with the CLI's exit codes for a bad scheduler (2) or an unusable cluster (3)."""
+    from osmobulge.experiments.runs import run_batch
+
+    try:
+        return run_batch(paths, steps, scheduler=scheduler, workers=workers or None, force=force, options=options,
+                         progress=progress)
+    except ImportError as err:
+        _fail(str(err), EXIT_ENVIRONMENT, as_json)
+    except (OSError, TimeoutError) as err:
+        _fail(f"cannot reach the scheduler {scheduler!r}: {err}", EXIT_ENVIRONMENT, as_json)
+    except ValueError as err:
+        _fail(str(err), EXIT_BAD_INPUT, as_json)
 
 
 def _print_outcomes(res):
@@ -116,6 +130,8 @@ def init(
     condition: Annotated[str, typer.Option(help="Condition label for grouping.")] = "",
     force: Annotated[bool, typer.Option("--force", help="Replace an existing experiment.toml (a .bak is kept).")]
     = False,
+    quiet: _QUIET = False,
+    as_json: _JSON = False,
 ):
     """Write a commented experiment.toml template into DIR."""
     from osmobulge.experiments.metadata import write_template
@@ -124,9 +140,11 @@ def init(
         path = write_template(directory, name=name or None, material=material, frames=frames,
                               condition=condition, force=force)
     except (FileExistsError, ValueError) as err:
-        typer.echo(f"error: {err}", err=True)
-        raise typer.Exit(EXIT_BAD_INPUT) from None
-    typer.echo(f"wrote {path}; edit it, put the frames in place, then `osmobulge run {directory}`")
+        _fail(str(err), EXIT_BAD_INPUT, as_json)
+    if as_json:
+        typer.echo(json.dumps({"exit_code": 0, "path": str(path)}))
+    elif not quiet:
+        typer.echo(f"wrote {path}; edit it, put the frames in place, then `osmobulge run {directory}`")
 
 
 @app.command()
@@ -147,8 +165,7 @@ def fit(dirs: _DIRS,
 
     bad = [m for m in (model or []) if m not in MODELS]
     if bad:
-        typer.echo(f"error: --model {bad[0]!r}: expected one of {', '.join(MODELS)}", err=True)
-        raise typer.Exit(EXIT_BAD_INPUT)
+        _fail(f"--model {bad[0]!r}: expected one of {', '.join(MODELS)}", EXIT_BAD_INPUT, as_json)
     options = {"models": list(model)} if model else None
     _batch(dirs, ["fit"], scheduler=scheduler, workers=workers, force=force, quiet=quiet, as_json=as_json,
            options=options)
@@ -176,6 +193,8 @@ def catalog(
     csv: Annotated[bool, typer.Option("--csv", help="Print CSV.")] = False,
     group_by: Annotated[str, typer.Option("--group-by", help="Also summarise per condition: comma-separated "
                                           "keys among geometry, loading, material, condition.")] = "",
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="Print nothing: the exit code tells whether "
+                                        "experiments were found (0) or not (2).")] = False,
 ):
     """Table of every experiment under ROOT: metadata, status, frames kept/excluded, P_w(1), fit quality."""
     import math
@@ -184,21 +203,20 @@ def catalog(
     from osmobulge.experiments.catalog import group_catalog
 
     if as_json and csv:
-        typer.echo("error: give --json or --csv, not both", err=True)
-        raise typer.Exit(EXIT_BAD_INPUT)
+        _fail("give --json or --csv, not both", EXIT_BAD_INPUT)
     for r in root:
         if not Path(r).is_dir():
-            typer.echo(f"error: {r}: not a folder", err=True)
-            raise typer.Exit(EXIT_BAD_INPUT)
+            _fail(f"{r}: not a folder", EXIT_BAD_INPUT, as_json)
     df = make_catalog(root)
     groups = None
     if group_by:
         try:
             groups = group_catalog(df, [g.strip() for g in group_by.split(",") if g.strip()])
         except ValueError as err:
-            typer.echo(f"error: --group-by: {err}", err=True)
-            raise typer.Exit(EXIT_BAD_INPUT) from None
-    if as_json:
+            _fail(f"--group-by: {err}", EXIT_BAD_INPUT, as_json)
+    if quiet:
+        pass
+    elif as_json:
         clean = lambda v: None if isinstance(v, float) and math.isnan(v) else v  # noqa: E731
         rows = [{k: clean(v) for k, v in r.items()} for r in df.to_dict(orient="records")]
         if groups is not None:
@@ -261,24 +279,19 @@ def campaign(
     scheduler: _SCHED = "processes", workers: _WORKERS = 0, quiet: _QUIET = False, as_json: _JSON = False,
 ):
     """Run every experiment, then fit each group simultaneously -> OUT/campaign.json, campaign.nc, report.html."""
-    from osmobulge.experiments.runs import run_batch, run_campaign
+    from osmobulge.experiments.runs import run_campaign
 
-    paths = _expand(dirs)
-    try:
-        res = run_batch(paths, ["process", "fit", "report"], scheduler=scheduler, workers=workers or None,
-                        progress=not (quiet or as_json))
-    except ImportError as err:
-        typer.echo(f"error: {err}", err=True)
-        raise typer.Exit(EXIT_ENVIRONMENT) from None
-    except OSError as err:
-        typer.echo(f"error: cannot reach the scheduler {scheduler!r}: {err}", err=True)
-        raise typer.Exit(EXIT_ENVIRONMENT) from None
+    paths = _expand(dirs, as_json)
+    res = _run_batch(paths, ["process", "fit", "report"], scheduler=scheduler, workers=workers,
+                     progress=not (quiet or as_json), as_json=as_json)
     ok = [Path(o.path) for o in res.outcomes if o.status == "ok"]
+    if not ok:
+        _fail("campaign: no experiment ran successfully: " + "; ".join(f"{o.path}: {o.error}" for o in
+                                                                        res.outcomes), res.exit_code, as_json)
     try:
         summary = run_campaign(ok, out, group_by=group_by, progress=not (quiet or as_json))
     except ValueError as err:
-        typer.echo(f"error: {err}", err=True)
-        raise typer.Exit(EXIT_BAD_INPUT) from None
+        _fail(str(err), EXIT_BAD_INPUT, as_json)
     if as_json:
         typer.echo(json.dumps({"batch": res.to_dict(), "campaign": summary}, default=str))
     elif not quiet:
@@ -318,9 +331,12 @@ def demo(
     try:
         summary = run_demo(directory, chambers=chambers, workers=workers or None, scheduler=scheduler,
                            force=force, progress=not (quiet or as_json))
-    except FileExistsError as err:
-        typer.echo(f"error: {err}", err=True)
-        raise typer.Exit(EXIT_BAD_INPUT) from None
+    except ImportError as err:
+        _fail(str(err), EXIT_ENVIRONMENT, as_json)
+    except (OSError, TimeoutError) as err:
+        _fail(f"cannot reach the scheduler {scheduler!r}: {err}", EXIT_ENVIRONMENT, as_json)
+    except (FileExistsError, ValueError) as err:
+        _fail(str(err), EXIT_BAD_INPUT, as_json)
     if as_json:
         typer.echo(json.dumps(summary, default=str))
     elif not quiet:

@@ -186,8 +186,9 @@ def _check_frame(frame) -> int:
 
 def _check_points(points, name="points") -> list:
     arr = np.asarray(points, dtype=float)
-    if arr.ndim != 2 or arr.shape[1] != 2 or arr.shape[0] < 3:
-        raise ValueError(f"{name}: expected an array of shape (N, 2) with N >= 3 (x, y in m), got shape {arr.shape}")
+    if arr.ndim != 2 or arr.shape[1] != 2 or arr.shape[0] < 4:
+        raise ValueError(f"{name}: expected an array of shape (N, 2) with N >= 4 (x, y in m; the extraction fits "
+                         f"a spline through them), got shape {arr.shape}")
     if not np.all(np.isfinite(arr)):
         raise ValueError(f"{name}: points must be finite")
     if np.nanmax(np.abs(arr)) > 1.0:
@@ -407,7 +408,7 @@ def set_manual_profile(cur: Curation, frame: int, points, *, chamber: str | None
     points : array_like of shape (N, 2), m
         Membrane midline points in image coordinates, metres: ``x`` = column *
         pixel size (right), ``y`` = row * pixel size (down), origin at the
-        centre of pixel (0, 0).  N >= 3.
+        centre of pixel (0, 0), ordered along the membrane.  N >= 4.
     chamber : str, optional
         Region name when the field holds several chambers.
     force : bool

@@ -239,8 +239,9 @@ def run_demo(directory, *, chambers: int = 2, workers: int | None = None, schedu
         P_w(1) (double-exponential fit through the ODE), the truth and the
         relative error; also written to ``DIR/demo-summary.json``.
     """
-    from osmobulge.experiments.runs import run_batch, run_campaign
+    from osmobulge.experiments.runs import check_scheduler, run_batch, run_campaign
 
+    check_scheduler(scheduler)  # before minutes of rendering
     t0 = time.perf_counter()
     directory = Path(directory)
     folders = write_demo_campaign(directory, chambers=chambers, force=force, progress=progress,
@@ -249,7 +250,8 @@ def run_demo(directory, *, chambers: int = 2, workers: int | None = None, schedu
     batch = run_batch(folders, ("process", "fit", "report"), scheduler=scheduler, workers=workers, force=force,
                       progress=progress)
     ok = [Path(o.path) for o in batch.outcomes if o.status == "ok"]
-    camp = run_campaign(ok, directory / "campaign", group_by="material", progress=progress)
+    camp = run_campaign(ok, directory / "campaign", group_by="material", progress=progress) if ok else \
+        {"groups": [], "report": None}
     truth = json.loads((directory / "truth.json").read_text())
     recovery = []
     for g in camp["groups"]:

@@ -471,8 +471,20 @@ class Experiment:
             "temperature_K": c.temperature,
             "pixel_size_um": None if im.pixel_size is None else r(im.pixel_size * 1e6),
             "frame_interval_min": None if im.frame_interval is None else r(im.frame_interval / 60.0),
+            "frame_times": self._timing(),
             "bulge_direction": im.bulge_direction,
         }
+
+    def _timing(self) -> str:
+        im = self.imaging
+        if im.timestamps_from_files:
+            return "from the files' metadata"
+        if im.timestamps is not None:
+            t = im.timestamps
+            return f"{len(t)} times from timestamps_min, {t[0] / 60:g} to {t[-1] / 60:g} min"
+        if im.frame_interval is not None:
+            return f"every {im.frame_interval / 60:g} min"
+        return ""
 
 
 def material_from_spec(spec):

@@ -25,7 +25,8 @@ import numpy as np
 
 from osmobulge.experiments._io import atomic_write_text
 
-__all__ = ["HtmlReport", "figure_png", "write_experiment_report", "write_campaign_report"]
+__all__ = ["HtmlReport", "figure_png", "write_experiment_report", "write_campaign_report", "extraction_warnings",
+           "plot_volume_ratio", "plot_instantaneous", "plot_prestretch", "plot_frame_strip"]
 
 _CSS = """
 body{font-family:system-ui,-apple-system,Segoe UI,Helvetica,Arial,sans-serif;margin:2em auto;max-width:1100px;
@@ -302,6 +303,11 @@ def plot_prestretch(extraction):
         return fig
     x, y = np.ravel(vt.values).astype(float), np.ravel(lp.values).astype(float)
     ok = np.isfinite(x) & np.isfinite(y)
+    if "flag" in extraction.variables and extraction["flag"].shape == vt.shape:
+        good = np.ravel(extraction["flag"].values).astype(str) == "ok"
+        if (ok & ~good).any():
+            ax.plot(x[ok & ~good], y[ok & ~good], "x", ms=5, color="#c22", label="flagged frames (not fitted)")
+        ok &= good
     ax.plot(x[ok], y[ok], "o", ms=4, mfc="none", color="k", label="measured (rim radius / a)")
     if ok.sum() >= 3:
         try:
@@ -453,13 +459,14 @@ def write_experiment_report(exp, path) -> Path:
     rep = HtmlReport(f"osmobulge report: {exp.name}")
     rep.p(f"{exp.path}", cls="small")
 
-    warnings = list(js.get("warnings", []))
+    warnings = extraction_warnings(extraction) + list(js.get("warnings", []))
     rep.h2("Quality")
     if warnings:
         for w in warnings:
             rep.note(w, "warn")
     else:
-        rep.note("no warnings: every model converged with determined parameters", "ok")
+        rep.note("no warnings: every frame traced without a flag and every model converged with determined "
+                 "parameters", "ok")
 
     rep.h2("Experiment")
     rep.table(exp.summary())
@@ -494,6 +501,8 @@ def write_experiment_report(exp, path) -> Path:
     inst = js.get("instantaneous", {})
     if inst.get("error"):
         rep.note(f"instantaneous permeability: {inst['error']}", "err")
+    if "instantaneous" not in js:
+        rep.note("not computed ([analysis] instantaneous = false); the fitted laws only", "ok")
     rep.figure(plot_instantaneous(fits, js), "Instantaneous P_w (main text Eqn 25, corrected) against lambda_bar, "
                "binned, with the fitted laws.")
     if inst.get("P_w1") is not None:
@@ -509,10 +518,54 @@ def write_experiment_report(exp, path) -> Path:
             rep.parts.append("</details>")
 
     rep.h2("Software and parameters")
-    rep.table({"osmobulge": __version__, "code": code_version(), "analysis": json.dumps(js.get("analysis", {})),
-               "extraction parameters": json.dumps({k: _fmt(v) for k, v in extraction.attrs.items()
-                                                    if not k.startswith("experiment_")})[:4000]})
+    steps = read_state(exp.path).get("steps", {})
+    rep.table({"osmobulge": __version__, "code (version + source hash)": code_version(),
+               "extraction made by": extraction.attrs.get("osmobulge_code", extraction.attrs.get("osmobulge_version")),
+               "fits made by": js.get("code"),
+               **{f"{k} step finished": steps.get(k, {}).get("finished") for k in ("process", "fit")},
+               "analysis ([analysis] of experiment.toml)": json.dumps(js.get("analysis", {}))})
+    rep.parts.append("<details><summary>every extraction parameter (attributes of extraction.nc)</summary>")
+    rep.table({k: _fmt(v) if not isinstance(v, np.ndarray) else ", ".join(map(str, v.tolist()))
+               for k, v in extraction.attrs.items() if not k.startswith("experiment_")})
+    rep.parts.append("</details>")
     return rep.write(path)
+
+
+def extraction_warnings(extraction) -> list[str]:
+    """Quality warnings of an extraction: flagged frames, skipped files, half-volume disagreement, drift.
+
+    Parameters
+    ----------
+    extraction : xarray.Dataset
+        ``results/extraction.nc``.
+
+    Returns
+    -------
+    list of str
+    """
+    out = []
+    if "flag" in extraction.variables:
+        flags = np.asarray(extraction["flag"].values).astype(str)
+        frames = np.asarray(extraction["frame"].values) if "frame" in extraction.variables else \
+            np.arange(extraction.sizes["time"])
+        per_frame = flags.reshape(len(frames), -1)
+        for f in sorted(set(flags.ravel()) - {"ok"}):
+            hit = frames[(per_frame == f).any(axis=1)]
+            listed = ", ".join(map(str, hit[:12])) + (" ..." if hit.size > 12 else "")
+            out.append(f"extraction flagged {hit.size} frame(s) '{f}': {listed} (not fitted unless kept in the "
+                       "curation)")
+    bad = str(extraction.attrs.get("bad_frames", "none"))
+    if bad and bad != "none":
+        out.append(f"unreadable frame files skipped by the reader: {bad}")
+    if "volume_disagreement" in extraction.variables:
+        vd = np.asarray(extraction["volume_disagreement"].values, float)
+        ok = np.asarray(extraction["flag"].values).astype(str) == "ok" if "flag" in extraction.variables else \
+            np.ones(vd.shape, bool)
+        vd = vd[ok & np.isfinite(vd)]
+        if vd.size and np.median(vd) > 0.05:
+            out.append(f"left and right halves of the domes differ by {np.median(vd) * 100:.0f} % in volume "
+                       "(median): the chamber axis or the focus may be off")
+    return out
 
 
 def write_campaign_report(summary: dict, datasets: dict, path) -> Path:

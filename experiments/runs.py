@@ -76,6 +76,8 @@ EXIT_FAILED = 1  # some experiments failed in a step (others are done; re-run to
 EXIT_BAD_INPUT = 2  # bad input: no experiment found, invalid experiment.toml, missing frames, bad option
 EXIT_ENVIRONMENT = 3  # environment: dask.distributed missing or scheduler unreachable
 SCHEDULERS = ("processes", "serial")
+#: how long to try reaching a dask scheduler before giving up (exit code 3)
+SCHEDULER_TIMEOUT = "10s"
 
 
 class ExperimentLocked(RuntimeError):
@@ -171,6 +173,9 @@ def atomic_path(path):
         yield Path(tmp)
         with open(tmp, "rb+") as fh:
             os.fsync(fh.fileno())
+        umask = os.umask(0)  # mkstemp made it 0600: give it the mode a plain open() would
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)
         os.replace(tmp, path)
     except BaseException:
         with contextlib.suppress(OSError):
@@ -211,6 +216,10 @@ def _lock(results: Path):
                                    f"{other.get('host')}); remove {lock} if that run is gone") from None
         with os.fdopen(fd, "w") as fh:
             json.dump(me, fh)
+        # temporary files of runs that were killed mid-write (nobody else writes here while we hold the lock)
+        for tmp in results.glob(".*.tmp"):
+            with contextlib.suppress(OSError):
+                tmp.unlink()
         break
     else:  # pragma: no cover - lost a race twice
         raise ExperimentLocked(f"{results.parent}: could not take the lock {lock}")
@@ -544,6 +553,7 @@ def run_batch(paths: Sequence, steps: Sequence[str] = STEPS, *, scheduler="proce
         The scheduler cannot be reached.
     """
     t0 = time.perf_counter()
+    check_scheduler(scheduler)
     paths = [Path(p) for p in paths]
     if pipeline not in (None, "default"):
         _closure(steps, _pipeline(pipeline))  # validate step names early
@@ -629,20 +639,25 @@ def _run_pool(paths, n, done, args):
             done(*fut.result())
 
 
+def check_scheduler(scheduler) -> None:
+    """Raise ValueError unless ``scheduler`` is 'processes', 'serial', an address or a distributed Client."""
+    if isinstance(scheduler, str) and scheduler not in SCHEDULERS and "://" not in scheduler and ":" not in scheduler:
+        raise ValueError(f"scheduler = {scheduler!r}: expected 'processes', 'serial' or a dask scheduler address "
+                         "such as tcp://127.0.0.1:8786")
+
+
 def _dask_client(scheduler):
     if not isinstance(scheduler, str):
         return scheduler, False
     if scheduler in SCHEDULERS:  # pragma: no cover - handled by the caller
         raise ValueError(scheduler)
-    if "://" not in scheduler and ":" not in scheduler:
-        raise ValueError(f"scheduler = {scheduler!r}: expected 'processes', 'serial' or a dask scheduler address "
-                         "such as tcp://127.0.0.1:8786")
+    check_scheduler(scheduler)
     try:
         from distributed import Client
     except ImportError as err:
         raise ImportError("scheduler address given but dask.distributed is not installed: "
                           "pip install 'osmobulge[cluster]'") from err
-    return Client(scheduler, timeout="10s"), True
+    return Client(scheduler, timeout=SCHEDULER_TIMEOUT), True
 
 
 @contextlib.contextmanager
@@ -757,7 +772,7 @@ def experiment_attrs(exp: Experiment) -> dict:
     meta = exp.summary()
     attrs = {f"experiment_{k}": v for k, v in meta.items() if v is not None and k not in
              ("radius_um", "depth_um", "membrane_thickness_um", "concentration_M", "feed_concentration_M",
-              "temperature_K", "pixel_size_um", "frame_interval_min")}
+              "temperature_K", "pixel_size_um", "frame_interval_min", "frame_times")}
     attrs.update(exp.chamber.to_chamber().to_attrs())
     attrs["osmobulge_code"] = code_version()
     return _netcdf_safe_attrs(attrs)

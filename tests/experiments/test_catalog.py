@@ -74,3 +74,72 @@ def test_invalid_experiment_is_exit_2_with_json(tmp_path):
     assert res.exit_code == EXIT_BAD_INPUT and "expected one of" in res.output
     res = runner.invoke(app, ["run", str(tmp_path), "--scheduler", "nonsense", "-q"])
     assert res.exit_code == EXIT_BAD_INPUT and "scheduler" in res.output
+
+
+def _frames_experiment(path, frames):
+    import numpy as np
+    import tifffile
+
+    from osmobulge.experiments.metadata import write_template
+
+    (path / "frames").mkdir(parents=True)
+    for i, f in enumerate(np.asarray(frames)):
+        tifffile.imwrite(path / "frames" / f"f{i:02d}.tif", f)
+    write_template(path, name=path.name)
+    return path
+
+
+@pytest.mark.parametrize("args", [
+    ["init", "{d}/new"],
+    ["catalog", "{d}"],
+    ["process", "{d}/nothing-here"],
+    ["fit", "{d}/nothing-here"],
+    ["report", "{d}/nothing-here"],
+    ["run", "{d}/nothing-here"],
+    ["campaign", "{d}/nothing-here", "--out", "{d}/camp"],
+    ["demo", "{d}/demo", "--chambers", "0"],
+])
+def test_every_command_has_quiet_and_json(tmp_path, args):
+    """--quiet prints nothing on stdout; --json prints one JSON document with the exit code, also on errors."""
+    assert _init(tmp_path / "e").exit_code == 0
+    (tmp_path / "nothing-here").mkdir()
+    argv = [a.format(d=tmp_path) for a in args]
+    quiet = runner.invoke(app, [*argv, "--quiet"])
+    if argv[0] == "init":
+        (tmp_path / "new" / "experiment.toml").unlink()
+    as_json = runner.invoke(app, [*argv, "--json"])
+    assert quiet.stdout == ""
+    assert quiet.exit_code == as_json.exit_code
+    doc = json.loads(as_json.stdout)
+    if isinstance(doc, dict) and "exit_code" in doc:
+        assert doc["exit_code"] == as_json.exit_code
+    if argv[0] in ("init", "catalog"):
+        assert as_json.exit_code == 0
+    else:  # an empty folder, or --chambers 0: bad input, named on stderr and in the JSON
+        assert as_json.exit_code == EXIT_BAD_INPUT and doc["error"] and "error:" in as_json.stderr
+
+
+def test_exit_code_1_failed_step_and_3_environment(tmp_path, monkeypatch):
+    import sys
+
+    import numpy as np
+
+    from osmobulge.experiments import runs
+    from osmobulge.experiments.runs import EXIT_ENVIRONMENT, EXIT_FAILED
+
+    # frames without any chamber: the extraction fails (a failed step, not bad input) -> 1
+    d = _frames_experiment(tmp_path / "blank", np.full((4, 60, 80), 30000, np.uint16))
+    res = runner.invoke(app, ["process", str(d), "--scheduler", "serial", "--json"])
+    assert res.exit_code == EXIT_FAILED, res.output
+    out = json.loads(res.stdout)["experiments"][0]
+    assert out["status"] == "failed" and out["error"].startswith("process:")
+    # a scheduler address without dask.distributed -> 3
+    monkeypatch.setitem(sys.modules, "distributed", None)
+    res = runner.invoke(app, ["run", str(d), "--scheduler", "tcp://127.0.0.1:9", "--json"])
+    assert res.exit_code == EXIT_ENVIRONMENT and "not installed" in json.loads(res.stdout)["error"]
+    monkeypatch.delitem(sys.modules, "distributed")
+    # a scheduler nobody listens on -> 3
+    pytest.importorskip("distributed")
+    monkeypatch.setattr(runs, "SCHEDULER_TIMEOUT", "1s")
+    res = runner.invoke(app, ["run", str(d), "--scheduler", "tcp://127.0.0.1:9", "-q"])
+    assert res.exit_code == EXIT_ENVIRONMENT and "cannot reach the scheduler" in res.stderr

@@ -31,7 +31,7 @@ from osmobulge.experiments.curation import (
     set_time_origin,
 )
 
-PTS = [[-200e-6, 0.0], [0.0, -150e-6], [200e-6, 0.0]]
+PTS = [[-200e-6, 0.0], [-100e-6, -120e-6], [100e-6, -120e-6], [200e-6, 0.0]]
 
 
 def test_empty_and_round_trip(tmp_path):
@@ -65,8 +65,8 @@ def test_reasons(reason):
         (lambda c: exclude_frame(c, 1, "blurry"), ValueError, "reason = 'blurry': expected one of delaminated"),
         (lambda c: exclude_frame(c, -1, "other"), ValueError, "frame = -1"),
         (lambda c: exclude_frame(c, 1.0, "other"), ValueError, "frame = 1.0"),
-        (lambda c: set_manual_profile(c, 1, [[0, 0], [1, 1]]), ValueError, "N >= 3"),
-        (lambda c: set_manual_profile(c, 1, [[0, 0], [10, 5], [20, 0]]), ValueError, "expected metres"),
+        (lambda c: set_manual_profile(c, 1, [[0, 0], [1e-6, 1e-6], [2e-6, 1e-6]]), ValueError, "N >= 4"),
+        (lambda c: set_manual_profile(c, 1, [[0, 0], [10, 5], [20, 5], [30, 0]]), ValueError, "expected metres"),
         (lambda c: set_time_origin(c, float("nan")), ValueError, "finite time in seconds"),
         (lambda c: set_chamber_regions(c, [{"rows": [5, 2], "cols": [0, 1]}]), ValueError, "start < stop"),
     ],
@@ -157,7 +157,7 @@ def test_killed_writer_leaves_old_file_whole(tmp_path):
         d = Path({str(tmp_path)!r})
         cur = load_curation(d)
         for i in range(1, 200):
-            cur = set_manual_profile(cur, i, [[0, 0], [1e-4, 1e-4], [2e-4, 0]])
+            cur = set_manual_profile(cur, i, [[0, 0], [1e-4, 1e-4], [2e-4, 1e-4], [3e-4, 0]])
         save_curation(d, cur)
     """)
     proc = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, text=True)

@@ -124,6 +124,12 @@ def test_curation_survives_reextraction(tmp_path):
         return ds
 
     before = check()
+    # the report shows the person's decisions and draws the manual profile in red over its frame
+    assert run_experiment(d, ["report"]).status == "ok"
+    html = (d / "results" / "report.html").read_text()
+    for text in ("Quality", "Curation", "out_of_focus", "blurred", "Frames and traced profiles", "Volume ratio",
+                 "Rim pre-stretch", "Instantaneous permeability", "Parameters", "Software and parameters"):
+        assert text in html, text
     # a frame file changes (re-exported with other noise): process must run again
     frame7 = _render(np.linspace(0, 1.2, 8), seed=99).frames[7]
     tifffile.imwrite(d / "frames" / "frame_007.tif", frame7)
@@ -139,6 +145,33 @@ def test_curation_survives_reextraction(tmp_path):
     # nothing changed: everything is skipped
     third = run_experiment(d, ["fit"])
     assert [s.status for s in third.steps] == ["skipped", "skipped"]
+
+
+def test_frame_strip_draws_the_traces_on_the_membrane(tmp_path):
+    """The strip's lines are the extraction's profile_col/row, and they lie on the dark membrane band."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from osmobulge.experiments.report import plot_frame_strip
+
+    series = _render(np.linspace(0, 1.2, 6), seed=7)
+    d = _write(tmp_path / "s", series.frames)
+    set_manual_profile(d, 2, _truth_profile_m(series.truth, 2), by="tester")
+    assert run_experiment(d, ["process"]).status == "ok"
+    ds = xr.load_dataset(d / "results" / "extraction.nc", engine="h5netcdf")
+    fig = plot_frame_strip(load_experiment(d), ds, n=6)
+    for i, ax in enumerate(fig.axes):
+        (line,) = ax.get_lines()
+        np.testing.assert_allclose(line.get_xdata(), ds["profile_col"].values[i])
+        np.testing.assert_allclose(line.get_ydata(), ds["profile_row"].values[i])
+        assert line.get_color() == ("#ff3b30" if i == 2 else "#00d0ff")  # manual in red
+        img = np.asarray(ax.get_images()[0].get_array())
+        c = np.clip(np.round(line.get_xdata()).astype(int), 0, SHAPE[1] - 1)
+        med = [float(np.median(img[np.clip(np.round(line.get_ydata() + shift).astype(int), 0, SHAPE[0] - 1), c]))
+               for shift in (0, -5, 5)]
+        # the line is on the dark membrane band; 5 px above or below it is bright liquid
+        assert med[0] < 0.8 * min(med[1:]), (i, med)
+    matplotlib.pyplot.close(fig)
 
 
 def test_chamber_regions_stack_along_chamber(tmp_path):

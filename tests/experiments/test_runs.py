@@ -99,7 +99,7 @@ def test_skip_when_inputs_unchanged(three):
     # curation: manual profiles feed the process step, exclusions do not (in this pipeline)
     exclude_frame(d, 0, "other")
     assert [s.status for s in run_experiment(d, ["fit"], pipeline=PIPE).steps] == ["skipped", "skipped"]
-    set_manual_profile(d, 0, [[0, 0], [1e-4, -1e-4], [2e-4, 0]])
+    set_manual_profile(d, 0, [[0, 0], [1e-4, -1e-4], [2e-4, -1e-4], [3e-4, 0]])
     assert [s.status for s in run_experiment(d, ["fit"], pipeline=PIPE).steps] == ["done", "skipped"]
     # options are inputs; force re-runs
     assert [s.status for s in run_experiment(d, ["fit"], pipeline=PIPE, options={"scale": 2}).steps] == [
@@ -209,6 +209,21 @@ def test_killed_netcdf_write_leaves_no_half_file(tmp_path):
     xr.testing.assert_identical(xr.open_dataset(target, engine="h5netcdf").load(),
                                 xr.Dataset({"v": ("t", np.arange(3.0))}))
     assert all(p.name.startswith(".") for p in tmp_path.iterdir() if p != target)
+
+
+def test_leftovers_of_a_killed_write_are_removed_and_modes_are_normal(three):
+    """The hidden temporary file a kill leaves in results/ is removed by the next run; outputs get 0666 & ~umask."""
+    d = three[0]
+    (d / "results").mkdir(exist_ok=True)
+    left = d / "results" / ".sum.json.x1y2.tmp"
+    left.write_text("half")
+    assert run_experiment(d, ["process"], pipeline=PIPE).status == "ok"
+    assert not left.exists()
+    umask = os.umask(0)
+    os.umask(umask)
+    with atomic_path(d / "results" / "x.nc") as tmp:
+        tmp.write_text("x")
+    assert (d / "results" / "x.nc").stat().st_mode & 0o777 == 0o666 & ~umask
 
 
 # ---- the same small pipeline in an importable module, for worker processes ----------------------------
