@@ -248,13 +248,16 @@ def _print_catalog(df, groups):
     from rich.table import Table
 
     console = Console()
+    if not console.is_terminal:  # piped into a file or a pager: no terminal width to respect
+        console = Console(width=max(console.width, 160))
     table = Table(title=f"{len(df)} experiments")
     cols = [("name", "", "s"), ("condition", "", "s"), ("status", "", "s"), ("material", "", "s"),
             ("radius_um", "a um", "g"), ("membrane_thickness_um", "l0 um", "g"), ("concentration_M", "C0 M", "g"),
             ("n_kept", "kept", "g"), ("n_excluded", "excl", "g"), ("n_flagged", "flag", "g"),
             ("P_w1", "P_w(1) m2/s", ".3e"), ("fit_rms", "rms V/V0", ".2g"), ("fit_model", "model", "s")]
-    for _, head, _ in cols:
-        table.add_column(head or _, justify="left")
+    for key, head, spec in cols:
+        table.add_column(head or key, justify="left" if spec == "s" else "right",
+                         overflow="fold" if spec == "s" else "ellipsis", no_wrap=spec != "s")
     for _, row in df.iterrows():
         table.add_row(*[_fmt(row[c], spec) for c, _, spec in cols])
     console.print(table)

@@ -681,10 +681,12 @@ def _progress(progress, total: int):
             bar.update(task, advance=1, description=f"{outcome.name or Path(outcome.path).name}: {mark}")
 
         def detail(description, done, total_):
-            """Current step / frames of an experiment run in this process."""
-            if not sub:
+            """Current step (``total_`` None: an indeterminate bar) / frames of an experiment run in this process."""
+            if total_ is None or not sub:  # a new step: a fresh task (rich cannot set a total back to None)
+                if sub:
+                    bar.remove_task(sub.pop())
                 sub.append(bar.add_task(description, total=total_))
-            bar.update(sub[0], description=description, completed=done, total=total_)
+            bar.update(sub[0], description=description, completed=done)
 
         tick.detail = detail
         try:
