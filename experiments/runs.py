@@ -33,14 +33,13 @@ import hashlib
 import json
 import os
 import socket
-import tempfile
 import time
 import traceback
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from osmobulge.experiments._io import atomic_write_text
+from osmobulge.experiments._io import atomic_path, atomic_write_text
 from osmobulge.experiments.metadata import MODELS, Experiment, MetadataError, load_experiment
 
 __all__ = [
@@ -156,33 +155,6 @@ def frames_fingerprint(exp: Experiment) -> list:
 # ---------------------------------------------------------------------------------------------
 # atomic outputs, lock, state
 # ---------------------------------------------------------------------------------------------
-@contextlib.contextmanager
-def atomic_path(path):
-    """Yield a temporary path beside ``path``; on success move it onto ``path`` (``os.replace``).
-
-    For writers that want a file name (netCDF, matplotlib).  On an exception, or
-    when the process dies, ``path`` keeps its old content (or stays absent) and
-    the temporary file is removed (or left as a hidden ``.*.tmp`` file that is
-    never read).
-    """
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    os.close(fd)
-    try:
-        yield Path(tmp)
-        with open(tmp, "rb+") as fh:
-            os.fsync(fh.fileno())
-        umask = os.umask(0)  # mkstemp made it 0600: give it the mode a plain open() would
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)
-        os.replace(tmp, path)
-    except BaseException:
-        with contextlib.suppress(OSError):
-            os.unlink(tmp)
-        raise
-
-
 def _pid_alive(pid: int) -> bool:
     try:
         os.kill(pid, 0)
