@@ -49,8 +49,8 @@ import xarray as xr
 from scipy import ndimage
 
 from osmobulge import __version__
-from osmobulge.modeling.bulge import bulge_profiles as profiles
 from osmobulge.imaging._raster import Layer, band_polygon, blurred_band, circle_polygon
+from osmobulge.modeling.bulge import bulge_profiles as profiles
 from osmobulge.modeling.materials import PDMS
 
 __all__ = [

@@ -14,7 +14,6 @@ from scipy import ndimage
 from scipy.interpolate import CubicSpline
 from scipy.spatial import cKDTree
 
-from osmobulge.modeling.bulge import bulge_profiles as profiles
 from osmobulge.imaging.synthetic import (
     Nuisances,
     SceneGeometry,
@@ -23,6 +22,7 @@ from osmobulge.imaging.synthetic import (
     render_simulation,
 )
 from osmobulge.modeling import PreStretch, bulge_mechanics, bulge_profile
+from osmobulge.modeling.bulge import bulge_profiles as profiles
 from osmobulge.modeling.materials import PDMS
 
 # a small chamber keeps the frames small: a = 100 um, h = 50 um, l0 = 10 um at 1 um/px
