@@ -25,13 +25,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from osmobulge.modeling.transport import Chamber
+
 __all__ = [
     "EXPERIMENT_FILE",
     "FRAME_SUFFIXES",
     "MODELS",
     "BULGE_DIRECTIONS",
     "MetadataError",
-    "ChamberSpec",
     "ImagingSpec",
     "AnalysisSpec",
     "Experiment",
@@ -305,39 +306,6 @@ def _check_regions(where: str, value, problems: list):
 # the validated experiment
 # ----------------------------------------------------------------------------------------------
 @dataclass(frozen=True)
-class ChamberSpec:
-    """Chamber geometry and loading, SI.
-
-    Attributes
-    ----------
-    radius : float, m
-    depth : float, m
-    thickness : float, m
-        Unstretched membrane thickness l0.
-    concentration : float, mol/m**3
-    feed_concentration : float, mol/m**3
-    temperature : float, K
-    vant_hoff : float
-    """
-
-    radius: float
-    depth: float
-    thickness: float
-    concentration: float
-    feed_concentration: float = 0.0
-    temperature: float = 298.15
-    vant_hoff: float = 2.0
-
-    def to_chamber(self):
-        """The :class:`osmobulge.modeling.transport.Chamber` of this geometry and loading."""
-        from osmobulge.modeling.transport import Chamber
-
-        return Chamber(self.radius, self.depth, self.thickness, self.concentration,
-                       feed_concentration=self.feed_concentration, temperature=self.temperature,
-                       vant_hoff=self.vant_hoff)
-
-
-@dataclass(frozen=True)
 class ImagingSpec:
     """How the frames were taken (SI).
 
@@ -399,7 +367,7 @@ class Experiment:
     name, condition, date, operator, notes : str
     material_spec : str or dict
         The preset name, or the ``[material]`` table as written.
-    chamber : ChamberSpec
+    chamber : osmobulge.modeling.Chamber
     imaging : ImagingSpec
     analysis : AnalysisSpec
     raw : dict
@@ -409,7 +377,7 @@ class Experiment:
     path: Path
     name: str
     material_spec: Any
-    chamber: ChamberSpec
+    chamber: Chamber
     imaging: ImagingSpec
     analysis: AnalysisSpec = field(default_factory=AnalysisSpec)
     condition: str = ""
@@ -682,12 +650,15 @@ def validate_metadata(data: dict, base=None, *, check_frames: bool = True, path=
         raise MetadataError(problems, path)
 
     s = lambda sec, k: values[sec][k] * _SCHEMA[sec][k].si  # noqa: E731
-    chamber = ChamberSpec(
-        radius=s("chamber", "radius_um"), depth=s("chamber", "depth_um"),
-        thickness=s("chamber", "membrane_thickness_um"), concentration=s("chamber", "concentration_M"),
-        feed_concentration=s("chamber", "feed_concentration_M"), temperature=s("chamber", "temperature_K"),
-        vant_hoff=s("chamber", "vant_hoff"),
-    )
+    try:
+        chamber = Chamber(
+            radius=s("chamber", "radius_um"), depth=s("chamber", "depth_um"),
+            thickness=s("chamber", "membrane_thickness_um"), concentration=s("chamber", "concentration_M"),
+            feed_concentration=s("chamber", "feed_concentration_M"), temperature=s("chamber", "temperature_K"),
+            vant_hoff=s("chamber", "vant_hoff"),
+        )
+    except ValueError as err:  # e.g. a membrane thicker than the chamber radius
+        raise MetadataError([f"[chamber]: {err}"], path) from None
     imaging = ImagingSpec(
         frames=im["frames"],
         pixel_size=s("imaging", "pixel_size_um") if "pixel_size_um" in im else None,

@@ -747,7 +747,7 @@ def experiment_attrs(exp: Experiment) -> dict:
     attrs = {f"experiment_{k}": v for k, v in meta.items() if v is not None and k not in
              ("radius_um", "depth_um", "membrane_thickness_um", "concentration_M", "feed_concentration_M",
               "temperature_K", "pixel_size_um", "frame_interval_min", "frame_times")}
-    attrs.update(exp.chamber.to_chamber().to_attrs())
+    attrs.update(exp.chamber.to_attrs())
     attrs["osmobulge_code"] = code_version()
     return _netcdf_safe_attrs(attrs)
 
@@ -964,7 +964,7 @@ def process_experiment(exp: Experiment, results: Path, *, progress: Callable | N
                 raise FramesError(f"chamber region {region['name']!r} rows {region['rows']} cols {region['cols']} "
                                   f"exceeds the frames ({arr.shape[1]} x {arr.shape[2]} px)")
             arr = arr[:, r0:r1, c0:c1]
-        kwargs = {"pixel_size": p, "frame_interval": 1.0, "chamber": exp.chamber.to_chamber(),
+        kwargs = {"pixel_size": p, "frame_interval": 1.0, "chamber": exp.chamber,
                   "bulge_direction": im.bulge_direction, "metadata": None, **options}
         if per_region[k]:
             kwargs["manual_profiles"] = per_region[k]
@@ -1035,7 +1035,7 @@ def observations_from_extraction(ds, exp: Experiment) -> list:
     import numpy as np
     import xarray as xr
 
-    chamber = exp.chamber.to_chamber()
+    chamber = exp.chamber
     kept = np.asarray(ds["kept"].values, bool) if "kept" in ds else np.ones(ds.sizes["time"], bool)
     if "volume_ratio" in ds:
         vr = ds["volume_ratio"]

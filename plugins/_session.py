@@ -181,7 +181,7 @@ class CurationSession:
     @property
     def chamber_volume(self) -> float:
         """Initial chamber volume :math:`V_0 = \\pi a^2 h`, m**3 (denominator of V/V0)."""
-        return float(self.experiment.chamber.to_chamber().volume)
+        return float(self.experiment.chamber.volume)
 
     def check_frame(self, frame) -> int:
         """Validate a frame index; returns it as int."""

@@ -32,7 +32,7 @@ def _fake_extract(exp, results, options):
     from osmobulge.modeling.simulate import simulate
 
     law = DoubleExponential.PEO_PDMS if exp.material_name == "PEO_PDMS" else DoubleExponential.PDMS
-    sim = simulate(exp.chamber.to_chamber(), exp.material, law, TIMES, on_limit="truncate")
+    sim = simulate(exp.chamber, exp.material, law, TIMES, on_limit="truncate")
     rng = np.random.default_rng(abs(hash(exp.name)) % 2**32)
     n = sim.sizes["time"]
     v = sim["volume_ratio"].values * (1 + 0.005 * rng.standard_normal(n))
