@@ -675,11 +675,40 @@ def _resample_halves(prof, a, n_s):
     return out_r, out_z, out_t, arc
 
 
+def _point_segment_distance(pts, seg):
+    """Distances (n, m) from points (n, 2) to the m segments of the polyline ``seg`` (m + 1, 2)."""
+    a, b = seg[:-1], seg[1:]
+    ab = b - a
+    len2 = np.maximum(np.einsum("ij,ij->i", ab, ab), 1e-300)
+    ap = pts[:, None, :] - a[None, :, :]
+    u = np.clip(np.einsum("nmk,mk->nm", ap, ab) / len2, 0.0, 1.0)
+    closest = a[None, :, :] + u[..., None] * ab[None, :, :]
+    return np.hypot(pts[:, None, 0] - closest[..., 0], pts[:, None, 1] - closest[..., 1])
+
+
+def _polylines_cross(pa, pb):
+    """True when any segment of polyline ``pa`` crosses one of ``pb``."""
+    def orient(p, q, r):
+        return np.sign((q[..., 0] - p[..., 0]) * (r[..., 1] - p[..., 1]) - (q[..., 1] - p[..., 1]) * (r[..., 0] - p[..., 0]))
+
+    a1, a2 = pa[:-1, None, :], pa[1:, None, :]
+    b1, b2 = pb[None, :-1, :], pb[None, 1:, :]
+    o1, o2 = orient(a1, a2, b1), orient(a1, a2, b2)
+    o3, o4 = orient(b1, b2, a1), orient(b1, b2, a2)
+    return bool(np.any((o1 * o2 < 0) & (o3 * o4 < 0)))
+
+
 def _min_gap(mid_a, thick_a, mid_b, thick_b):
-    """Smallest distance between two bands' edges (m); < 0 when they overlap."""
-    d = np.hypot(mid_a[:, None, 0] - mid_b[None, :, 0], mid_a[:, None, 1] - mid_b[None, :, 1])
-    d -= 0.5 * (thick_a[:, None] + thick_b[None, :])
-    return float(d.min())
+    """Smallest distance between two bands' edges (m); < 0 when they overlap.
+
+    Point-to-segment distances both ways (so subsampled midlines cannot pass between
+    each other's samples unnoticed), and -1 when the midlines cross outright.
+    """
+    if _polylines_cross(mid_a, mid_b):
+        return -1.0
+    d_ab = _point_segment_distance(mid_a, mid_b) - 0.5 * (thick_a[:, None] + 0.5 * (thick_b[None, :-1] + thick_b[None, 1:]))
+    d_ba = _point_segment_distance(mid_b, mid_a) - 0.5 * (thick_b[:, None] + 0.5 * (thick_a[None, :-1] + thick_a[None, 1:]))
+    return float(min(d_ab.min(), d_ba.min()))
 
 
 def render_series(

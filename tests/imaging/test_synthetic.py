@@ -497,3 +497,14 @@ def test_scene_validation_and_event_range():
         render_series([0.5], nuisances=Nuisances(fractured_frames=(3,)), **SMALL)
     with pytest.raises(ValueError, match="well"):
         render_series([0.5], nuisances=Nuisances(neighbours=((150e-6, 1.0),)), **SMALL)
+
+
+def test_touching_truth_flag_sees_crossing_domes():
+    """Small chambers with close neighbours: the domes cross between subsampled midline points.
+
+    Regression: the gap was computed between subsampled points only, so crossing bands
+    could pass between samples and the truth said "ok" (found by the extraction tests).
+    """
+    nu = Nuisances(neighbours=((260e-6, 0.3), (-260e-6, 0.3)))
+    ser = render_series([0.5, 5.0], chamber=(100e-6, 50e-6, 10e-6), nuisances=nu, shape=(512, 768), pixel_size=1e-6)
+    assert list(ser.truth.flag.values) == ["ok", "touching"]
