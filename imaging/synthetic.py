@@ -689,7 +689,8 @@ def _point_segment_distance(pts, seg):
 def _polylines_cross(pa, pb):
     """True when any segment of polyline ``pa`` crosses one of ``pb``."""
     def orient(p, q, r):
-        return np.sign((q[..., 0] - p[..., 0]) * (r[..., 1] - p[..., 1]) - (q[..., 1] - p[..., 1]) * (r[..., 0] - p[..., 0]))
+        cross = (q[..., 0] - p[..., 0]) * (r[..., 1] - p[..., 1]) - (q[..., 1] - p[..., 1]) * (r[..., 0] - p[..., 0])
+        return np.sign(cross)
 
     a1, a2 = pa[:-1, None, :], pa[1:, None, :]
     b1, b2 = pb[None, :-1, :], pb[None, 1:, :]
@@ -706,8 +707,10 @@ def _min_gap(mid_a, thick_a, mid_b, thick_b):
     """
     if _polylines_cross(mid_a, mid_b):
         return -1.0
-    d_ab = _point_segment_distance(mid_a, mid_b) - 0.5 * (thick_a[:, None] + 0.5 * (thick_b[None, :-1] + thick_b[None, 1:]))
-    d_ba = _point_segment_distance(mid_b, mid_a) - 0.5 * (thick_b[:, None] + 0.5 * (thick_a[None, :-1] + thick_a[None, 1:]))
+    seg_b = 0.5 * (thick_b[:-1] + thick_b[1:])  # band thickness on each segment
+    seg_a = 0.5 * (thick_a[:-1] + thick_a[1:])
+    d_ab = _point_segment_distance(mid_a, mid_b) - 0.5 * (thick_a[:, None] + seg_b[None, :])
+    d_ba = _point_segment_distance(mid_b, mid_a) - 0.5 * (thick_b[:, None] + seg_a[None, :])
     return float(min(d_ab.min(), d_ba.min()))
 
 
