@@ -919,9 +919,7 @@ class ChamberTracer:
     def _from_points(self, view, g, out, manual):
         pts = np.asarray(manual, float)
         vx, vy = view.from_frame(pts[:, 1], pts[:, 0])
-        u, z = g.line.coords(np.c_[vx, vy])
-        order = np.argsort(u) if np.all(np.diff(u) != 0) and False else np.arange(len(u))
-        u, z = u[order], z[order]
+        u, z = g.line.coords(np.c_[vx, vy])  # picked in order along the membrane (an overhang is not monotone in u)
         if u[0] > u[-1]:
             u, z = u[::-1], z[::-1]
         spl = smooth_profile(np.c_[u, z])
@@ -934,6 +932,7 @@ class ChamberTracer:
         out.figures.update({"residual_rms": 0.0})
         out.flag, out.flag_figure, out.flag_value = "ok", "", np.nan
         out.ok = True
+        self.prev = out  # a person's profile guides the trace of the next frames
         return out
 
 
