@@ -5,6 +5,8 @@ Kept beside the data in ``DIR/curation.json``, never inside the raw images:
 - excluded frames, each with a reason (:data:`REASONS`), a free-text note, who and when;
 - frames kept on purpose although the automatic extraction flagged them;
 - manual profiles (points picked in the napari plugin, in metres, ``source = "manual"``);
+- priors: points picked on some frames that guide the automatic tracer on
+  the frames between (the semi-automatic mode; same coordinates);
 - the time origin (when the chamber met the water), in seconds of the frame clock;
 - chamber regions, when one field holds several chambers.
 
@@ -50,6 +52,8 @@ __all__ = [
     "keep_flagged_frame",
     "set_manual_profile",
     "remove_manual_profile",
+    "set_prior",
+    "remove_prior",
     "set_time_origin",
     "set_chamber_regions",
     "apply_curation",
@@ -91,6 +95,10 @@ class Curation:
         Frames kept although the automatic extraction flagged them: ``{"note", "by", "at"}``.
     manual_profiles : dict of int -> dict
         Frame index -> ``{"points" (list of [x, y], m), "source": "manual", "chamber", "by", "at"}``.
+    priors : dict of int -> dict
+        Frame index -> ``{"points" (list of [x, y], m), "units": "m", "chamber", "by", "at"}``:
+        points the tracer starts from on that frame and on the frames between
+        (``priors=`` of :func:`osmobulge.imaging.extract.extract`).
     time_origin : float or None, s
         Time (frame clock) taken as t = 0 of the flux model.
     chamber_regions : tuple of dict or None
@@ -104,6 +112,7 @@ class Curation:
     excluded: dict = field(default_factory=dict)
     kept_flagged: dict = field(default_factory=dict)
     manual_profiles: dict = field(default_factory=dict)
+    priors: dict = field(default_factory=dict)
     time_origin: float | None = None
     chamber_regions: tuple | None = None
     history: tuple = ()
@@ -118,6 +127,7 @@ class Curation:
             "excluded": {str(k): v for k, v in sorted(self.excluded.items())},
             "kept_flagged": {str(k): v for k, v in sorted(self.kept_flagged.items())},
             "manual_profiles": {str(k): v for k, v in sorted(self.manual_profiles.items())},
+            "priors": {str(k): v for k, v in sorted(self.priors.items())},
             "time_origin": self.time_origin,
             "chamber_regions": None if self.chamber_regions is None else [dict(r) for r in self.chamber_regions],
             "history": list(self.history),
@@ -139,11 +149,15 @@ class Curation:
         manual = frames(data.get("manual_profiles"), "manual_profiles")
         for k, v in manual.items():
             _check_points(v.get("points"), f"manual_profiles[{k}].points")
+        priors = frames(data.get("priors"), "priors")  # absent in files written before priors existed
+        for k, v in priors.items():
+            _check_points(v.get("points"), f"priors[{k}].points")
         regions = data.get("chamber_regions")
         return cls(
             excluded=excluded,
             kept_flagged=frames(data.get("kept_flagged"), "kept_flagged"),
             manual_profiles=manual,
+            priors=priors,
             time_origin=None if data.get("time_origin") is None else float(data["time_origin"]),
             chamber_regions=None if regions is None else tuple(_check_regions(regions)),
             history=tuple(data.get("history", ())),
@@ -155,13 +169,16 @@ class Curation:
         """The decisions without bookkeeping (history, revision, who/when)."""
         strip = lambda d: {k: {kk: vv for kk, vv in v.items() if kk not in ("by", "at")}  # noqa: E731
                            for k, v in sorted(d.items())}
-        return {
+        out = {
             "excluded": strip(self.excluded),
             "kept_flagged": strip(self.kept_flagged),
             "manual_profiles": strip(self.manual_profiles),
             "time_origin": self.time_origin,
             "chamber_regions": None if self.chamber_regions is None else [dict(r) for r in self.chamber_regions],
         }
+        if self.priors:  # only when set: curations without priors keep the hashes they had before priors existed
+            out["priors"] = strip(self.priors)
+        return out
 
     def _log(self, action: str, frame=None, detail="", by=None) -> tuple:
         entry = {"at": _now(), "by": by or _user(), "action": action, "frame": frame, "detail": detail}
@@ -459,6 +476,70 @@ def remove_manual_profile(cur: Curation, frame: int, *, by: str | None = None) -
 
 
 @_path_or_curation
+def set_prior(cur: Curation, frame: int, points, *, chamber: str | None = None, by: str | None = None,
+              force: bool = False) -> Curation:
+    """Store points picked on one frame as a prior of the automatic tracer (semi-automatic mode).
+
+    Unlike a manual profile, a prior does not replace the frame's trace: the
+    ``process`` step passes the priors to :func:`osmobulge.imaging.extract.extract`
+    (``priors=``), whose tracer starts from them on their frame and from the
+    nearest one on frames where it has no good previous trace.
+
+    Parameters
+    ----------
+    cur : Curation or path
+    frame : int
+    points : array_like of shape (N, 2), m
+        Points on the membrane in image coordinates, metres: ``x`` = column *
+        pixel size, ``y`` = row * pixel size (as :func:`set_manual_profile`).  N >= 4.
+    chamber : str, optional
+        Region name when the field holds several chambers.
+    force : bool
+        Replace an existing, different prior of this frame.
+
+    Returns
+    -------
+    Curation
+
+    Raises
+    ------
+    CurationConflict
+        A different prior exists for this frame.
+    """
+    frame = _check_frame(frame)
+    pts = _check_points(points)
+    old = cur.priors.get(frame)
+    if old is not None and old["points"] == pts and old.get("chamber") == chamber:
+        return cur
+    if old is not None and not force:
+        raise CurationConflict(f"frame {frame} already has a prior ({len(old['points'])} points, by "
+                               f"{old.get('by')} at {old.get('at')}); pass force=True to replace it")
+    priors = dict(cur.priors)
+    priors[frame] = {"points": pts, "units": "m", "chamber": chamber, "by": by or _user(), "at": _now()}
+    return replace(cur, priors=priors, history=cur._log("prior", frame, f"{len(pts)} points", by))
+
+
+@_path_or_curation
+def remove_prior(cur: Curation, frame: int, *, by: str | None = None) -> Curation:
+    """Drop the prior of a frame (the tracer no longer starts from it).
+
+    Parameters
+    ----------
+    cur : Curation or path
+    frame : int
+
+    Returns
+    -------
+    Curation
+    """
+    frame = _check_frame(frame)
+    if frame not in cur.priors:
+        return cur
+    priors = {k: v for k, v in cur.priors.items() if k != frame}
+    return replace(cur, priors=priors, history=cur._log("remove_prior", frame, "", by))
+
+
+@_path_or_curation
 def set_time_origin(cur: Curation, time: float, *, by: str | None = None, force: bool = False) -> Curation:
     """Set t = 0 of the flux model, in seconds of the frame clock.
 
@@ -517,7 +598,7 @@ def curation_fingerprint(cur: Curation, part: str = "all") -> str:
     ----------
     cur : Curation
     part : {"all", "extraction", "fit"}
-        ``extraction``: manual profiles and chamber regions; ``fit``: exclusions,
+        ``extraction``: manual profiles, priors and chamber regions; ``fit``: exclusions,
         kept flagged frames and the time origin.
 
     Returns
@@ -530,7 +611,7 @@ def curation_fingerprint(cur: Curation, part: str = "all") -> str:
         raise ValueError(f"part = {part!r}: expected one of {parts}")
     d = cur.decisions()
     if part == "extraction":
-        d = {k: d[k] for k in ("manual_profiles", "chamber_regions")}
+        d = {k: d[k] for k in ("manual_profiles", "priors", "chamber_regions") if k in d}
     elif part == "fit":
         d = {k: d[k] for k in ("excluded", "kept_flagged", "time_origin")}
     return hashlib.sha256(json.dumps(d, sort_keys=True).encode()).hexdigest()
@@ -549,6 +630,8 @@ def curation_summary(cur: Curation) -> dict:
         "n_kept_flagged": len(cur.kept_flagged),
         "n_manual_profiles": len(cur.manual_profiles),
         "manual_frames": sorted(int(k) for k in cur.manual_profiles),
+        "n_priors": len(cur.priors),
+        "prior_frames": sorted(int(k) for k in cur.priors),
         "time_origin_s": cur.time_origin,
         "n_chamber_regions": 0 if cur.chamber_regions is None else len(cur.chamber_regions),
         "revision": cur.revision,

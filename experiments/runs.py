@@ -869,8 +869,8 @@ def open_experiment_frames(exp: Experiment, *, on_frame: Callable | None = None)
         time_source="files" if im.timestamps_from_files else "experiment.toml")
 
 
-def _manual_for_region(manual: dict, regions, p: float) -> list[dict]:
-    """Split the manual profiles by chamber region; points shifted into each region's crop (m)."""
+def _manual_for_region(manual: dict, regions, p: float, what: str = "manual profile") -> list[dict]:
+    """Split the manual profiles (or priors) by chamber region; points shifted into each region's crop (m)."""
     import numpy as np
 
     if not regions:
@@ -881,7 +881,7 @@ def _manual_for_region(manual: dict, regions, p: float) -> list[dict]:
         pts = np.asarray(v["points"], float)
         if v.get("chamber") is not None:
             if v["chamber"] not in names:
-                raise FramesError(f"manual profile of frame {f}: chamber {v['chamber']!r} is not one of the "
+                raise FramesError(f"{what} of frame {f}: chamber {v['chamber']!r} is not one of the "
                                   f"chamber regions {names}")
             k = names.index(v["chamber"])
         else:  # the region holding the points' centre
@@ -889,8 +889,9 @@ def _manual_for_region(manual: dict, regions, p: float) -> list[dict]:
             hits = [i for i, r in enumerate(regions) if r["rows"][0] <= row < r["rows"][1]
                     and r["cols"][0] <= col < r["cols"][1]]
             if len(hits) != 1:
-                raise FramesError(f"manual profile of frame {f} lies in {len(hits)} chamber regions: name its "
-                                  "chamber (set_manual_profile(..., chamber=NAME))")
+                setter = "set_prior" if what == "prior" else "set_manual_profile"
+                raise FramesError(f"{what} of frame {f} lies in {len(hits)} chamber regions: name its "
+                                  f"chamber ({setter}(..., chamber=NAME))")
             k = hits[0]
         r = regions[k]
         out[k][f] = pts - np.array([r["cols"][0], r["rows"][0]], float) * p
@@ -905,8 +906,10 @@ def process_experiment(exp: Experiment, results: Path, *, progress: Callable | N
     region (``curation.json`` or ``[imaging] chamber_regions``) is cropped and
     extracted on its own and the datasets are stacked along a ``chamber``
     dimension.  Manual profiles of ``curation.json`` replace the automatic
-    trace of their frames (``profile_source = "manual"``); the curation file
-    itself is only read.
+    trace of their frames (``profile_source = "manual"``); its priors (points
+    picked on a few frames, the semi-automatic mode) are passed to the tracer
+    as ``priors=`` and their frame numbers recorded in the ``prior_frames``
+    attribute.  The curation file itself is only read.
 
     Parameters
     ----------
@@ -917,13 +920,15 @@ def process_experiment(exp: Experiment, results: Path, *, progress: Callable | N
         ``progress(description, done, total)`` after every frame read.
     **extract_options
         Passed to :func:`osmobulge.imaging.extract.extract` (``settings``,
-        ``errors``, ``n_profile``, ``priors``, ...).
+        ``errors``, ``n_profile``, ...).  ``priors`` here (frame position ->
+        ``(N, 2)`` points ``(x, y)`` in m of the full frame) are added to the
+        curation's, replacing them on the same frames (a preview of unsaved picks).
 
     Returns
     -------
     dict
         ``n_frames``, ``n_flagged``, ``flags`` (count per flag), ``n_manual``,
-        ``n_chambers``.
+        ``n_priors``, ``n_chambers``.
     """
     import dask
     import numpy as np
@@ -953,6 +958,16 @@ def process_experiment(exp: Experiment, results: Path, *, progress: Callable | N
         raise FramesError(f"manual profiles of frames {missing}: no such frame (the series has {n})")
     manual = {pos[int(f)]: v for f, v in cur.manual_profiles.items()}
     per_region = _manual_for_region(manual, regions, p)
+    missing = [f for f in cur.priors if int(f) not in pos]
+    if missing:
+        raise FramesError(f"priors of frames {missing}: no such frame (the series has {n})")
+    priors = {pos[int(f)]: v for f, v in cur.priors.items()}
+    extra = extract_options.pop("priors", None) or {}
+    priors.update({int(i): {"points": np.asarray(v, float), "chamber": None} for i, v in extra.items()})
+    bad = [i for i in priors if not 0 <= i < n]
+    if bad:
+        raise FramesError(f"priors at frame positions {bad}: outside 0..{n - 1}")
+    priors_region = _manual_for_region(priors, regions, p, "prior")
     options = {"progress": False, **extract_options}
     parts = []
     for k, region in enumerate(regions or [None]):
@@ -968,6 +983,8 @@ def process_experiment(exp: Experiment, results: Path, *, progress: Callable | N
                   "bulge_direction": im.bulge_direction, "metadata": None, **options}
         if per_region[k]:
             kwargs["manual_profiles"] = per_region[k]
+        if priors_region[k]:
+            kwargs["priors"] = priors_region[k]
         with dask.config.set(scheduler="synchronous"):  # frames read here, one at a time, never on a cluster
             ds = extract(arr, **kwargs)
         # the real frame clock (extract was given a unit interval: it has no timestamps= argument)
@@ -1000,12 +1017,15 @@ def process_experiment(exp: Experiment, results: Path, *, progress: Callable | N
     ds.attrs.update(frame_interval=float(np.median(np.diff(ef.times))) if n > 1 else 0.0, source=ef.source,
                     time_source=ef.time_source,
                     bad_frames="; ".join(f"{a}: {b}" for a, b in ef.bad_frames) or "none")
+    # frame numbers of curation.json (extract records positions in its own series)
+    ds.attrs["prior_frames"] = (np.array(sorted(int(ef.frame_index[i]) for i in priors), np.int64) if priors
+                                else "none")
     ds.attrs.update(experiment_attrs(exp))
     _write_netcdf(ds, results / "extraction.nc")
     flags = np.asarray(ds["flag"].values).astype(str).ravel()
     counts = {str(k): int(v) for k, v in zip(*np.unique(flags, return_counts=True), strict=True)}
     return {"n_frames": int(ds.sizes["time"]), "n_flagged": int(np.sum(flags != "ok")), "flags": counts,
-            "n_manual": len(manual), "n_chambers": max(1, len(regions))}
+            "n_manual": len(manual), "n_priors": len(priors), "n_chambers": max(1, len(regions))}
 
 
 # ---- fit ---------------------------------------------------------------------------------------

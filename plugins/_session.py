@@ -9,6 +9,9 @@ directly::
     s.set_picks(12, clicked_points_rc)       # snapped to the membrane, fitted live
     s.accept(12)                             # manual profile saved (source = "manual")
     s.exclude(20, "delaminated")
+    s.set_picks(30, pts_30); s.set_picks(40, pts_40)
+    s.trace_with_priors()                    # preview: frames between traced from the picks
+    s.trace_with_priors(save=True)           # keep them as priors in curation.json and run process
     s.volume_series()                        # V/V0(t) with the decisions applied
 
 See :mod:`osmobulge.plugins._logic` for the coordinate conventions.
@@ -130,8 +133,9 @@ class CurationSession:
     extraction : xarray.Dataset or None
         ``DIR/results/extraction.nc`` (loaded into memory), if processed.
     picks : dict of int to ndarray of shape (N, 2), px
-        Points per frame, ``(row, col)``: the accepted manual profiles, then the
-        user's edits (not saved until :meth:`accept`).
+        Points per frame, ``(row, col)``: the accepted manual profiles and the
+        saved priors, then the user's edits (not saved until :meth:`accept` or
+        :meth:`keep_as_priors`).
     """
 
     def __init__(self, folder, *, chamber: int = 0):
@@ -155,7 +159,9 @@ class CurationSession:
         self.picks: dict[int, np.ndarray] = {}
         self._fits: dict[int, ProfileFit] = {}
         self._accepted: dict[int, ProfileFit] = {}
-        for f, v in self.curation.manual_profiles.items():
+        for f, v in self.curation.priors.items():
+            self.picks[int(f)] = points_m_to_rc(v["points"], self.pixel_size)
+        for f, v in self.curation.manual_profiles.items():  # a frame's manual profile wins over its prior
             self.picks[int(f)] = points_m_to_rc(v["points"], self.pixel_size)
 
     # ------------------------------------------------------------------ basics
@@ -530,31 +536,47 @@ class CurationSession:
         self._emit("extraction")
         return out
 
-    def trace_with_priors(self, frames=None):
-        """Semi-automatic mode: re-trace frames guided by the picked frames (not saved).
+    def _prior_picks(self) -> dict:
+        """The picks usable as priors: frame -> (N >= 4, 2) points (x, y), m."""
+        return {int(f): points_rc_to_m(p, self.pixel_size) for f, p in self.picks.items() if len(p) >= 4}
 
-        The frames with picks (saved manual profiles and unsaved picks) become
-        priors of :func:`osmobulge.imaging.extract` (``priors=``): the tracer
-        starts each frame between two picked frames from the nearest pick
-        instead of the previous frame's trace.
+    def trace_with_priors(self, frames=None, *, save: bool = False, by: str | None = None):
+        """Semi-automatic mode: re-trace frames guided by the picked frames.
+
+        The frames with picks (saved manual profiles, saved priors and unsaved
+        picks, at least 4 points each) become priors of
+        :func:`osmobulge.imaging.extract` (``priors=``): the tracer starts each
+        frame between two picked frames from the nearest pick instead of the
+        previous frame's trace.
 
         Parameters
         ----------
         frames : sequence of int, optional
             Frames to show the new traces of (default all).
+        save : bool
+            False (default): a preview, ``DIR/results`` and ``curation.json``
+            are not touched.  True: the picks of frames without a manual profile
+            are kept as priors in ``curation.json`` (:meth:`keep_as_priors`) and
+            the ``process`` step runs (:meth:`reprocess`), so later runs of
+            ``osmobulge process`` trace the same way.
+        by : str, optional
+            Who (with ``save``; default: the login name).
 
         Returns
         -------
         xarray.Dataset
             The new extraction; it replaces :attr:`extraction` in the session
-            (overlays and V/V0 show it).  ``DIR/results`` is not touched: accept
-            the frames you want to keep, or run ``process``.
+            (overlays and V/V0 show it).
         """
         from osmobulge.experiments.runs import process_experiment
 
-        priors = {int(f): points_rc_to_m(p, self.pixel_size) for f, p in self.picks.items() if len(p) >= 3}
+        priors = self._prior_picks()
         if not priors:
-            raise ValueError("semi-automatic tracing needs picked points on at least one frame")
+            raise ValueError("semi-automatic tracing needs picked points (at least 4) on at least one frame")
+        if save:
+            self.keep_as_priors(by=by)
+            self.reprocess()
+            return self.extraction
         with tempfile.TemporaryDirectory() as tmp:
             process_experiment(self.experiment, Path(tmp), priors=priors)
             import xarray as xr
@@ -565,6 +587,57 @@ class CurationSession:
         self._accepted.clear()
         self._emit("extraction")
         return self.extraction
+
+    def keep_as_priors(self, frames=None, *, by: str | None = None) -> list[int]:
+        """Save picks as priors of the tracer in ``curation.json`` (the next ``process`` uses them).
+
+        Parameters
+        ----------
+        frames : sequence of int, optional
+            Frames whose picks to keep (default: every frame with at least 4
+            picked points and no manual profile; a manual profile already
+            stands for its frame and guides the next ones).
+        by : str, optional
+            Who (default: the login name).
+
+        Returns
+        -------
+        list of int
+            The frames whose priors were saved.
+
+        Raises
+        ------
+        ValueError
+            A frame named in ``frames`` has fewer than 4 picked points.
+        osmobulge.experiments.curation.CurationConflict
+            Someone else saved the curation since this session loaded it.
+        """
+        if frames is None:
+            sel = [f for f, p in sorted(self.picks.items())
+                   if len(p) >= 4 and f not in self.curation.manual_profiles]
+        else:
+            sel = sorted({self.check_frame(f) for f in frames})
+            few = [f for f in sel if len(self.picks.get(f, ())) < 4]
+            if few:
+                raise ValueError(f"frames = {few}: fewer than 4 picked points (a prior needs N >= 4)")
+        new = self.curation
+        for f in sel:
+            # the person replaces the prior they are looking at: an explicit decision (force)
+            new = cur_api.set_prior(new, f, points_rc_to_m(self.picks[f], self.pixel_size), by=by, force=True)
+        self._save(new)
+        for f in sel:
+            self._emit("priors", f)
+        return sel
+
+    def remove_prior(self, frame: int, *, by: str | None = None) -> None:
+        """Drop a frame's saved prior (its picks stay in the session) and save."""
+        frame = self.check_frame(frame)
+        self._save(cur_api.remove_prior(self.curation, frame, by=by))
+        self._emit("priors", frame)
+
+    def is_prior(self, frame: int) -> bool:
+        """True when the saved curation holds a prior for the frame."""
+        return self.check_frame(frame) in self.curation.priors
 
     # ------------------------------------------------------------------ import / export
     def import_points(self, path, *, snap: bool = False, **kwargs) -> list[int]:

@@ -25,9 +25,11 @@ from osmobulge.experiments.curation import (
     keep_flagged_frame,
     load_curation,
     remove_manual_profile,
+    remove_prior,
     save_curation,
     set_chamber_regions,
     set_manual_profile,
+    set_prior,
     set_time_origin,
 )
 
@@ -221,3 +223,57 @@ def test_fingerprint_parts():
     assert curation_fingerprint(exclude_frame(base, 1, "other", by="x")) == curation_fingerprint(ex)
     with pytest.raises(ValueError, match="part = 'x'"):
         curation_fingerprint(base, "x")
+
+
+def test_priors_round_trip_conflicts_and_history(tmp_path):
+    cur = set_prior(Curation(), 2, PTS, by="ana")
+    assert cur.priors[2]["points"] == PTS and cur.priors[2]["units"] == "m" and cur.priors[2]["by"] == "ana"
+    assert set_prior(cur, 2, PTS) is cur  # same points: no-op
+    with pytest.raises(CurationConflict, match="frame 2 already has a prior"):
+        set_prior(cur, 2, np.array(PTS) * 1.1)
+    moved = set_prior(cur, 2, np.array(PTS) * 1.1, force=True)
+    np.testing.assert_allclose(moved.priors[2]["points"], np.array(PTS) * 1.1)
+    # a prior is not a manual profile: the frame keeps its automatic trace
+    assert not moved.manual_profiles and curation_summary(moved)["prior_frames"] == [2]
+    saved = save_curation(tmp_path, set_prior(moved, 5, PTS, chamber="left"))
+    back = load_curation(tmp_path)
+    assert back.priors == saved.priors and back.priors[5]["chamber"] == "left"
+    assert json.loads((tmp_path / CURATION_FILE).read_text())["priors"]["5"]["points"] == PTS
+    assert [h["action"] for h in back.history] == ["prior", "prior", "prior"]
+    # by folder: load, edit, save
+    remove_prior(tmp_path, 2)
+    back = load_curation(tmp_path)
+    assert set(back.priors) == {5} and back.history[-1]["action"] == "remove_prior" and back.revision == 2
+    assert remove_prior(back, 7) is back
+    with pytest.raises(ValueError, match="N >= 4"):
+        set_prior(back, 1, PTS[:3])
+    with pytest.raises(ValueError, match="expected metres"):
+        set_prior(back, 1, np.array(PTS) * 1e6)
+    with pytest.raises(ValueError, match="frame = -1"):
+        set_prior(back, -1, PTS)
+
+
+def test_priors_in_file_validated_and_old_files_load(tmp_path):
+    old = save_curation(tmp_path, exclude_frame(Curation(), 1, "other"))
+    data = json.loads((tmp_path / CURATION_FILE).read_text())
+    data.pop("priors")  # a file written before priors existed
+    (tmp_path / CURATION_FILE).write_text(json.dumps(data))
+    back = load_curation(tmp_path)
+    assert back.priors == {} and back.decisions() == old.decisions()
+    assert curation_fingerprint(back) == curation_fingerprint(old)
+    data["priors"] = {"3": {"points": [[0.0, 0.0], [1.0, 1.0]]}}
+    (tmp_path / CURATION_FILE).write_text(json.dumps(data))
+    with pytest.raises(ValueError, match=r"priors\[3\].points"):
+        load_curation(tmp_path)
+
+
+def test_priors_count_for_extraction_not_fit():
+    base = Curation()
+    pr = set_prior(base, 1, PTS)
+    assert curation_fingerprint(pr, "extraction") != curation_fingerprint(base, "extraction")
+    assert curation_fingerprint(pr, "fit") == curation_fingerprint(base, "fit")
+    # the same points as a manual profile are another decision
+    assert curation_fingerprint(pr, "extraction") != curation_fingerprint(set_manual_profile(base, 1, PTS),
+                                                                          "extraction")
+    # without priors the hash is the one of a curation written before priors existed
+    assert "priors" not in base.decisions() and "priors" in pr.decisions()

@@ -11,7 +11,7 @@ import pytest
 import tifffile
 import xarray as xr
 
-from osmobulge.experiments.curation import exclude_frame, load_curation, set_manual_profile
+from osmobulge.experiments.curation import exclude_frame, load_curation, remove_prior, set_manual_profile, set_prior
 from osmobulge.experiments.metadata import load_experiment
 from osmobulge.experiments.runs import (
     EXIT_BAD_INPUT,
@@ -145,6 +145,61 @@ def test_curation_survives_reextraction(tmp_path):
     # nothing changed: everything is skipped
     third = run_experiment(d, ["fit"])
     assert [s.status for s in third.steps] == ["skipped", "skipped"]
+
+
+def test_priors_in_the_curation_guide_the_process_step(tmp_path):
+    """A decoy membrane fools the tracker on one frame; a prior there (curation.json) fixes it on every run.
+
+    Frame 3 jumps from vtilde 0.2 to 0.8 and carries a second dark arc at vtilde 0.2
+    (where the previous frame's trace leads): the automatic trace follows the decoy.  The
+    person's points on the true membrane, saved as a prior, make ``process`` trace the
+    truth; the step re-runs when the prior is added and removed, and is skipped otherwise.
+    """
+    vt = np.array([0.0, 0.1, 0.2, 0.8, 0.9, 1.0])
+    series = _render(vt, seed=2)
+    decoy = _render(np.where(np.arange(vt.size) == 3, 0.2, vt), seed=2)  # same noise: only the dome differs
+    frames = series.frames.astype(float)
+    frames[3] *= np.minimum(decoy.frames[3] / np.maximum(series.frames[3].astype(float), 1.0), 1.0)
+    truth = series.truth
+    d = _write(tmp_path / "p", frames.astype(series.frames.dtype))
+    true_v3 = float(truth["volume"].values[3])
+
+    def volumes():
+        return xr.load_dataset(d / "results" / "extraction.nc", engine="h5netcdf")
+
+    assert run_experiment(d, ["process"]).status == "ok"
+    auto = volumes()
+    assert auto["volume"].values[3] < 0.5 * true_v3  # the tracker followed the decoy
+    assert auto.attrs["prior_frames"] == "none"
+    set_prior(d, 3, _truth_profile_m(truth, 3)[::8], by="tester")
+    out = run_experiment(d, ["process"])
+    assert out.step("process").status == "done" and out.step("process").summary["n_priors"] == 1
+    guided = volumes()
+    assert list(np.atleast_1d(guided.attrs["prior_frames"])) == [3]
+    assert guided["volume"].values[3] == pytest.approx(true_v3, rel=0.02)
+    assert str(guided["profile_source"].values[3]) == "auto"  # a prior guides; it does not replace the trace
+    np.testing.assert_allclose(guided["volume"].values[[1, 2, 4, 5]], truth["volume"].values[[1, 2, 4, 5]], rtol=0.03)
+    # unchanged curation: skipped; the prior removed: re-run, back to the automatic result
+    assert run_experiment(d, ["process"]).step("process").status == "skipped"
+    remove_prior(d, 3)
+    assert run_experiment(d, ["process"]).step("process").status == "done"
+    np.testing.assert_allclose(volumes()["volume"].values, auto["volume"].values)
+
+
+def test_priors_outside_the_chamber_regions_are_bad_input(tmp_path):
+    series = _render(np.linspace(0, 0.5, 3), seed=8)
+    w = SHAPE[1]
+    regions = (f'chamber_regions = [{{name = "L", rows = [0, {SHAPE[0]}], cols = [0, {w // 2}]}}, '
+               f'{{name = "R", rows = [0, {SHAPE[0]}], cols = [{w // 2}, {w}]}}]\n')
+    d = _write(tmp_path / "r", series.frames, extra=regions)
+    set_prior(d, 1, _truth_profile_m(series.truth, 1), chamber="X")
+    with pytest.raises(FramesError, match=r"prior of frame 1: chamber 'X' is not one of the chamber regions"):
+        from osmobulge.experiments.runs import process_experiment
+
+        process_experiment(load_experiment(d), tmp_path / "out")
+    set_prior(d, 9, _truth_profile_m(series.truth, 1))
+    with pytest.raises(FramesError, match=r"priors of frames \[9\]: no such frame"):
+        process_experiment(load_experiment(d), tmp_path / "out")
 
 
 def test_frame_strip_draws_the_traces_on_the_membrane(tmp_path):

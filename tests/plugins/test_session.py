@@ -152,6 +152,39 @@ def test_semi_automatic_tracing_uses_the_picks_as_priors(experiment):
         assert np.sqrt(np.mean(d**2)) < 0.5, (f, np.sqrt(np.mean(d**2)))
     with pytest.raises(ValueError, match="at least one frame"):
         CurationSession(folder).trace_with_priors()
+    assert load_curation(folder).revision == 0  # the preview saved nothing
+
+
+def test_picks_kept_as_priors_are_used_by_the_next_process(experiment):
+    """trace_with_priors(save=True): the picks go to curation.json and `process` traces with them."""
+    import xarray as xr
+
+    from osmobulge.experiments.runs import run_experiment
+
+    folder, truth = experiment
+    s = CurationSession(folder)
+    s.set_picks(1, clicks(truth, 1, seed=4))
+    s.set_picks(4, clicks(truth, 4, seed=5))
+    s.set_picks(5, clicks(truth, 5, n=3, seed=6))  # too few for a prior: left out
+    s.accept(4, by="tester")  # a manual profile stands for its frame: not stored again as a prior
+    ds = s.trace_with_priors(save=True, by="tester")
+    cur = load_curation(folder)
+    assert sorted(cur.priors) == [1] and s.is_prior(1) and not s.is_prior(4)
+    assert cur.priors[1]["by"] == "tester" and cur.history[-1]["action"] == "prior"
+    np.testing.assert_allclose(np.asarray(cur.priors[1]["points"]), s.picks[1][:, ::-1] * PIXEL)
+    on_disk = xr.load_dataset(folder / "results" / "extraction.nc", engine="h5netcdf")
+    assert list(np.atleast_1d(on_disk.attrs["prior_frames"])) == [1] == list(np.atleast_1d(ds.attrs["prior_frames"]))
+    assert str(on_disk["profile_source"].values[4]) == "manual"
+    np.testing.assert_allclose(ds["volume"].values, on_disk["volume"].values)
+    # a plain `osmobulge process` later: nothing changed, the step is skipped and keeps the guided result
+    assert run_experiment(folder, ["process"]).step("process").status == "skipped"
+    # a new session shows the saved prior as picks; named frames need >= 4 points
+    s2 = CurationSession(folder)
+    np.testing.assert_allclose(s2.picks[1], s.picks[1])
+    with pytest.raises(ValueError, match=r"frames = \[5\]: fewer than 4 picked points"):
+        s.keep_as_priors([5])
+    s2.remove_prior(1)
+    assert not load_curation(folder).priors
 
 
 def test_module_entry_point_help(capsys):
