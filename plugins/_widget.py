@@ -337,6 +337,7 @@ class ProfilePicker(Container):
         self._clear = PushButton(text="Clear points of this frame")
         self._remove = PushButton(text="Remove saved manual profile")
         self._semi = PushButton(text="Semi-automatic: trace between picked frames")
+        self._keep_priors = PushButton(text="Keep picks as priors (used by every later extraction)")
         self._reprocess = PushButton(text="Re-run extraction with manual profiles")
         self._file = FileEdit(mode="w", filter="Points (*.csv *.zip *.roi)", label="points file")
         self._import = PushButton(text="Import points")
@@ -345,13 +346,15 @@ class ProfilePicker(Container):
         io = Container(widgets=[self._file, Container(widgets=[self._import, self._export], layout="horizontal",
                                                           labels=False)], labels=True)
         self.extend([Container(widgets=[self._snap, self._search], labels=True), self._info, self._accept,
-                     self._clear, self._remove, self._semi, self._reprocess, io, self._message])
+                     self._clear, self._remove, self._semi, self._keep_priors, self._reprocess, io,
+                     self._message])
         self._updating = False
         self._building = False
         self._accept.changed.connect(self.accept)
         self._clear.changed.connect(self.clear)
         self._remove.changed.connect(self.remove)
         self._semi.changed.connect(self.semi_automatic)
+        self._keep_priors.changed.connect(self.keep_priors)
         self._reprocess.changed.connect(self.reprocess)
         self._import.changed.connect(lambda: self.import_points(self._file.value))
         self._export.changed.connect(lambda: self.export_points(self._file.value))
@@ -495,6 +498,12 @@ class ProfilePicker(Container):
         """Re-trace every frame guided by the picked frames (preview; see the session)."""
         self._guard(self.session.trace_with_priors)
         self._message.value = "traced with priors (preview: accept frames or re-run extraction to keep)"
+
+    def keep_priors(self):
+        """Save the picked frames as priors in the curation and re-trace with them."""
+        self._guard(self.session.trace_with_priors, save=True)
+        self._message.value = "picks kept as priors in curation.json; extraction re-run with them"
+        self.draw()
 
     def reprocess(self):
         """Run the process step with the saved manual profiles and reload the automatic profiles."""

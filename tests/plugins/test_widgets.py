@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+import xarray as xr
 from plugin_helpers import BAD, CHAMBER, PIXEL, truth_midline_rc
 
 from osmobulge.experiments.curation import load_curation
@@ -110,6 +111,26 @@ def test_widgets_pick_accept_exclude(make_napari_viewer, experiment, qtbot):
     cw._t0_here.clicked.emit()
     assert load_curation(folder).time_origin == pytest.approx(cw.session.times[BAD + 1])
     assert cw.plot_data()["time_min"][BAD + 1] == pytest.approx(0.0)
+
+
+def test_keep_picks_as_priors_button(make_napari_viewer, experiment):
+    """Semi-automatic mode from the dock: the picks are saved as priors and the extraction uses them."""
+    from osmobulge.plugins._widget import ProfilePicker
+
+    folder, truth = experiment
+    viewer = make_napari_viewer()
+    _open(viewer, folder)
+    pp = ProfilePicker(viewer)
+    viewer.dims.set_current_step(0, BAD)
+    for p in _clicks(truth, BAD):
+        pp.points_layer.add([BAD, *p])
+    pp._keep_priors.clicked.emit()
+    cur = load_curation(folder)
+    assert list(cur.priors) == [BAD] and BAD not in cur.manual_profiles
+    np.testing.assert_allclose(np.asarray(cur.priors[BAD]["points"]), pp.session.picks[BAD][:, ::-1] * PIXEL)
+    ds = xr.load_dataset(folder / "results" / "extraction.nc", engine="h5netcdf")
+    assert list(np.atleast_1d(ds.attrs["prior_frames"])) == [BAD]
+    assert "priors" in pp._message.value
 
 
 def test_keyboard_shortcuts(make_napari_viewer, experiment):
