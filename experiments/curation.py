@@ -413,6 +413,37 @@ def keep_flagged_frame(cur: Curation, frame: int, note: str = "", *, by: str | N
     return replace(cur, excluded=excluded, kept_flagged=kept, history=cur._log("keep_flagged", frame, note, by))
 
 
+def _set_points(cur, field_name, what, action, frame, points, *, chamber, by, force, extra=None):
+    """Store picked points of one frame in ``cur.<field_name>`` (manual profiles, priors).
+
+    An identical entry is a no-op; a different one raises :class:`CurationConflict`
+    unless ``force``.  The change is logged in the history.
+    """
+    frame = _check_frame(frame)
+    pts = _check_points(points)
+    entries = getattr(cur, field_name)
+    old = entries.get(frame)
+    if old is not None and old["points"] == pts and old.get("chamber") == chamber:
+        return cur
+    if old is not None and not force:
+        raise CurationConflict(f"frame {frame} already has a {what} ({len(old['points'])} points, by "
+                               f"{old.get('by')} at {old.get('at')}); pass force=True to replace it")
+    entries = dict(entries)
+    entries[frame] = {"points": pts, "units": "m", **(extra or {}), "chamber": chamber,
+                      "by": by or _user(), "at": _now()}
+    return replace(cur, **{field_name: entries}, history=cur._log(action, frame, f"{len(pts)} points", by))
+
+
+def _remove_points(cur, field_name, action, frame, by):
+    """Drop the entry of one frame from ``cur.<field_name>`` (no-op when absent)."""
+    frame = _check_frame(frame)
+    entries = getattr(cur, field_name)
+    if frame not in entries:
+        return cur
+    kept = {k: v for k, v in entries.items() if k != frame}
+    return replace(cur, **{field_name: kept}, history=cur._log(action, frame, "", by))
+
+
 @_path_or_curation
 def set_manual_profile(cur: Curation, frame: int, points, *, chamber: str | None = None, by: str | None = None,
                        force: bool = False) -> Curation:
@@ -440,19 +471,8 @@ def set_manual_profile(cur: Curation, frame: int, points, *, chamber: str | None
     CurationConflict
         A different manual profile exists for this frame.
     """
-    frame = _check_frame(frame)
-    pts = _check_points(points)
-    key = frame
-    old = cur.manual_profiles.get(key)
-    if old is not None and old["points"] == pts and old.get("chamber") == chamber:
-        return cur
-    if old is not None and not force:
-        raise CurationConflict(f"frame {frame} already has a manual profile ({len(old['points'])} points, by "
-                               f"{old.get('by')} at {old.get('at')}); pass force=True to replace it")
-    profiles = dict(cur.manual_profiles)
-    profiles[key] = {"points": pts, "units": "m", "source": "manual", "chamber": chamber,
-                     "by": by or _user(), "at": _now()}
-    return replace(cur, manual_profiles=profiles, history=cur._log("manual_profile", frame, f"{len(pts)} points", by))
+    return _set_points(cur, "manual_profiles", "manual profile", "manual_profile", frame, points,
+                       chamber=chamber, by=by, force=force, extra={"source": "manual"})
 
 
 @_path_or_curation
@@ -468,11 +488,7 @@ def remove_manual_profile(cur: Curation, frame: int, *, by: str | None = None) -
     -------
     Curation
     """
-    frame = _check_frame(frame)
-    if frame not in cur.manual_profiles:
-        return cur
-    profiles = {k: v for k, v in cur.manual_profiles.items() if k != frame}
-    return replace(cur, manual_profiles=profiles, history=cur._log("remove_manual_profile", frame, "", by))
+    return _remove_points(cur, "manual_profiles", "remove_manual_profile", frame, by)
 
 
 @_path_or_curation
@@ -506,17 +522,7 @@ def set_prior(cur: Curation, frame: int, points, *, chamber: str | None = None, 
     CurationConflict
         A different prior exists for this frame.
     """
-    frame = _check_frame(frame)
-    pts = _check_points(points)
-    old = cur.priors.get(frame)
-    if old is not None and old["points"] == pts and old.get("chamber") == chamber:
-        return cur
-    if old is not None and not force:
-        raise CurationConflict(f"frame {frame} already has a prior ({len(old['points'])} points, by "
-                               f"{old.get('by')} at {old.get('at')}); pass force=True to replace it")
-    priors = dict(cur.priors)
-    priors[frame] = {"points": pts, "units": "m", "chamber": chamber, "by": by or _user(), "at": _now()}
-    return replace(cur, priors=priors, history=cur._log("prior", frame, f"{len(pts)} points", by))
+    return _set_points(cur, "priors", "prior", "prior", frame, points, chamber=chamber, by=by, force=force)
 
 
 @_path_or_curation
@@ -532,11 +538,7 @@ def remove_prior(cur: Curation, frame: int, *, by: str | None = None) -> Curatio
     -------
     Curation
     """
-    frame = _check_frame(frame)
-    if frame not in cur.priors:
-        return cur
-    priors = {k: v for k, v in cur.priors.items() if k != frame}
-    return replace(cur, priors=priors, history=cur._log("remove_prior", frame, "", by))
+    return _remove_points(cur, "priors", "remove_prior", frame, by)
 
 
 @_path_or_curation
