@@ -28,6 +28,7 @@ from skimage import measure
 
 __all__ = [
     "EllipseFit",
+    "ellipse_distance",
     "fit_ellipse",
     "ProfileSpline",
     "smooth_profile",
@@ -84,6 +85,71 @@ class EllipseFit:
         return np.stack([x, y], axis=-1)
 
 
+def ellipse_distance(points, center, semi_axes, angle, *, max_iter=60):
+    """Shortest (orthogonal) distance of points from an ellipse, exact and vectorised.
+
+    Parameters
+    ----------
+    points : array_like of shape (N, 2)
+        ``(x, y)`` coordinates.
+    center, semi_axes, angle
+        The ellipse as in :class:`EllipseFit`.
+    max_iter : int
+        Newton iterations at most (typically 3-6 are needed).
+
+    Returns
+    -------
+    ndarray of shape (N,)
+
+    Notes
+    -----
+    Eberly's formulation (*Distance from a point to an ellipse*, 2013): in the
+    ellipse's frame, folded into the first quadrant with ``a >= b``, the closest
+    point is ``(a^2 x / (s + a^2), b^2 y / (s + b^2))`` with ``s`` the unique root
+    of the decreasing convex function
+    ``F(s) = (a x / (s + a^2))^2 + (b y / (s + b^2))^2 - 1`` on ``(-b^2, inf)``.
+    Newton's method started left of the root (``s0 = b y - b^2``, where ``F >= 0``)
+    and run in ``u = s + b^2`` (no cancellation near ``s = -b^2``)
+    converges monotonically, for points inside and outside alike.  This replaces
+    :meth:`skimage.measure.EllipseModel.residuals`, which runs an optimiser per
+    point (about 0.1 ms each) and, for points far from the ellipse, can stop in a
+    local minimum (seen: distances several px too long; the test checks this
+    function against brute force).
+
+    Examples
+    --------
+    >>> ellipse_distance([[3.0, 0.0], [0.0, 0.0], [0.0, 2.0]], (0, 0), (2, 1), 0.0).round(9).tolist()
+    [1.0, 1.0, 1.0]
+    """
+    p = np.asarray(points, float).reshape(-1, 2)
+    (xc, yc), (a, b), th = center, semi_axes, angle
+    a, b = float(a), float(b)
+    c, s_ = np.cos(th), np.sin(th)
+    dx, dy = p[:, 0] - xc, p[:, 1] - yc
+    x = np.abs(dx * c + dy * s_)
+    y = np.abs(-dx * s_ + dy * c)
+    if a < b:  # fold so the first axis is the major one
+        a, b, x, y = b, a, y, x
+    y = np.maximum(y, 1e-12 * a)  # on the major axis: the limit y -> 0+ is continuous
+    # Newton in u = s + b^2 > 0 (full relative precision where the root is close to s = -b^2)
+    d2 = a * a - b * b
+    u = b * y
+    for _ in range(int(max_iter)):
+        ra, rb = a * x / (u + d2), b * y / u
+        f = ra * ra + rb * rb - 1.0
+        df = -2.0 * (ra * ra / (u + d2) + rb * rb / u)
+        step = f / df
+        u = u - step
+        if np.all(np.abs(step) <= 1e-14 * u):
+            break
+    x0, y0 = a * a * x / (u + d2), b * b * y / u
+    return np.hypot(x - x0, y - y0)
+
+
+def _model_distance(model, pts):
+    return ellipse_distance(pts, model.center, model.axis_lengths, model.theta)
+
+
 def fit_ellipse(points, *, robust=False, residual_threshold=None, max_trials=200, seed=0) -> EllipseFit:
     """Least-squares ellipse (general conic) through 2-D points, as the paper's profile fit.
 
@@ -136,7 +202,7 @@ def fit_ellipse(points, *, robust=False, residual_threshold=None, max_trials=200
         if residual_threshold is not None and residual_threshold <= 0:
             raise ValueError(f"residual_threshold must be > 0, got {residual_threshold!r}")
         floor = 1e-9 * float(np.ptp(pts, axis=0).max())
-        res = np.abs(model.residuals(pts))
+        res = _model_distance(model, pts)
         # RANSAC, then refit on the inliers; without a given threshold shrink it to
         # 3 robust sigmas of the current inliers until the inlier set is stable
         for _ in range(1 if residual_threshold is not None else 6):
@@ -149,14 +215,14 @@ def fit_ellipse(points, *, robust=False, residual_threshold=None, max_trials=200
             refit = measure.EllipseModel.from_estimate(pts[rinl])
             if not refit:
                 break
-            res = np.abs(refit.residuals(pts))
+            res = _model_distance(refit, pts)
             new = res <= thr
             if new.sum() < 5:
                 break
             model, stable, inl = refit, np.array_equal(new, inl), new
             if stable:
                 break
-    res = np.abs(model.residuals(pts))
+    res = _model_distance(model, pts)
     a, b = (float(v) for v in model.axis_lengths)
     if not (np.isfinite(a) and np.isfinite(b) and a > 0 and b > 0):
         return EllipseFit(message="ellipse fit gave a degenerate conic")

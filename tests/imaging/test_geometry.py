@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from osmobulge.imaging.geometry import (
+    ellipse_distance,
     fit_ellipse,
     revolution_area,
     revolution_measures,
@@ -190,6 +191,29 @@ def test_robust_ellipse_fit_rejects_outliers():
     err_plain = abs(max(plain.semi_axes) - 100) + abs(min(plain.semi_axes) - 60)
     err_robust = abs(max(robust.semi_axes) - 100) + abs(min(robust.semi_axes) - 60)
     assert err_robust < err_plain
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_ellipse_distance_is_the_true_shortest_distance(seed):
+    """Against brute force over 400k points of the ellipse: inside, outside, near the centre, on the axes."""
+    from scipy.spatial import cKDTree
+
+    rng = np.random.default_rng(seed)
+    a, b = rng.uniform(1.0, 300.0, 2)
+    th, c = rng.uniform(-3.0, 3.0), rng.uniform(-100.0, 100.0, 2)
+    t = np.linspace(0.0, 2 * np.pi, 400_001)
+    ct, st = np.cos(th), np.sin(th)
+    curve = np.c_[c[0] + a * np.cos(t) * ct - b * np.sin(t) * st, c[1] + a * np.cos(t) * st + b * np.sin(t) * ct]
+    axes = np.r_[np.outer(np.linspace(-2, 2, 9), [a * ct, a * st]), np.outer(np.linspace(-2, 2, 9), [-b * st, b * ct])]
+    pts = np.r_[rng.normal(c, 2 * max(a, b), (60, 2)), c + rng.normal(0, 0.01 * min(a, b), (10, 2)), c + axes,
+                curve[::20_000] + rng.normal(0, 0.3, (21, 2))]
+    _, j = cKDTree(curve).query(pts)
+    # refine each brute-force nearest point on a 4001-point grid around it (resolution ~2e-8 of the perimeter)
+    tt = t[j][:, None] + np.linspace(-1, 1, 4001)[None, :] * (t[1] - t[0])
+    ex = c[0] + a * np.cos(tt) * ct - b * np.sin(tt) * st - pts[:, :1]
+    ey = c[1] + a * np.cos(tt) * st + b * np.sin(tt) * ct - pts[:, 1:]
+    brute = np.hypot(ex, ey).min(axis=1)
+    np.testing.assert_allclose(ellipse_distance(pts, c, (a, b), th), brute, rtol=0, atol=1e-6 * max(a, b))
 
 
 def test_ellipse_fit_failure_is_falsy_and_validation():
