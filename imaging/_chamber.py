@@ -21,6 +21,8 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy import ndimage as ndi
 
+from osmobulge.imaging._kernels import band_edges_rows, sample_transects
+
 __all__ = ["FrameView", "Line", "Well", "ChamberGeometry", "ROTATIONS", "detect_orientation", "find_chambers",
            "measure_line", "measure_walls", "band_edges", "step_crossing"]
 
@@ -75,6 +77,10 @@ class FrameView:
         out = ndi.map_coordinates(self.frame, [np.ravel(r), np.ravel(c)], order=1, mode="constant", cval=np.nan,
                                   output=np.float64, prefilter=False)
         return out.reshape(x.shape)
+
+    def transects(self, points, directions, offsets):
+        """Bilinear samples at ``points[i] + offsets[j] * directions[i]`` (view px), shape (N, K); nan outside."""
+        return sample_transects(self.frame, self.k, points, directions, offsets)
 
     def patch(self, r0, r1, c0, c1, dtype=np.float32):
         """Dense copy of view rows r0:r1, cols c0:c1 (clipped to the view)."""
@@ -161,7 +167,10 @@ class ChamberGeometry:
 
 # ---------------------------------------------------------------------------------- 1-D helpers
 def _nanmedian(a, **kw):
-    """``np.nanmedian`` without the all-nan warning (returns nan there)."""
+    """``np.nanmedian`` without the all-nan warning (returns nan there); plain median when all finite (fast)."""
+    a = np.asarray(a)
+    if np.isfinite(a).all():
+        return np.median(a, **kw)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
         return np.nanmedian(a, **kw)
@@ -169,29 +178,6 @@ def _nanmedian(a, **kw):
 
 def _take(a, idx):
     return np.take_along_axis(a, np.clip(idx, 0, a.shape[1] - 1)[:, None], axis=1)[:, 0]
-
-
-def _crossing(q, offsets, level, start, direction):
-    """First crossing of ``level`` walking from ``start`` in ``direction`` (+1/-1); nan if none."""
-    n, k = q.shape
-    cols = np.arange(k)[None, :]
-    below = q < level[:, None]
-    if direction > 0:
-        cand = np.where(below & (cols > start[:, None]), cols, k)
-        j = cand.min(axis=1)
-        ok = j < k
-        j0, j1 = np.clip(j - 1, 0, k - 1), np.clip(j, 0, k - 1)
-    else:
-        cand = np.where(below & (cols < start[:, None]), cols, -1)
-        j = cand.max(axis=1)
-        ok = j >= 0
-        j0, j1 = np.clip(j + 1, 0, k - 1), np.clip(j, 0, k - 1)
-    q0, q1 = _take(q, j0), _take(q, j1)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        t = np.clip((q0 - level) / (q0 - q1), 0.0, 1.0)
-    out = offsets[j0] + t * (offsets[j1] - offsets[j0])
-    out[~ok] = np.nan
-    return out
 
 
 def band_edges(profiles, offsets, polarity, *, centre=None, search=None, side=4):
@@ -230,20 +216,13 @@ def band_edges(profiles, offsets, polarity, *, centre=None, search=None, side=4)
     if not np.all(np.isfinite(q)):
         fill = _nanmedian(q, axis=1, keepdims=True) if n else 0.0
         q = np.where(np.isfinite(q), q, np.nan_to_num(fill, nan=0.0))
-    cols = np.arange(k)
     if centre is None:
-        ipk = np.argmax(q, axis=1)
+        c, s = np.zeros(n, np.int64), k
     else:
-        c = np.asarray(centre, int)
-        s = np.full(n, k) if search is None else np.broadcast_to(np.asarray(search), (n,)).astype(int)
-        win = np.abs(cols[None, :] - c[:, None]) <= s[:, None]
-        ipk = np.argmax(np.where(win, q, -np.inf), axis=1)
-    peak = _take(q, ipk)
-    left = np.median(q[:, :side], axis=1)
-    right = np.median(q[:, -side:], axis=1)
-    lo = _crossing(q, offsets, 0.5 * (peak + left), ipk, -1)
-    hi = _crossing(q, offsets, 0.5 * (peak + right), ipk, +1)
-    return 0.5 * (lo + hi), lo, hi, peak - 0.5 * (left + right), hi - lo
+        c = np.asarray(centre, np.int64)
+        s = k if search is None else np.asarray(search, np.int64)
+    mid, lo, hi, con, width = band_edges_rows(q, offsets, c, s, side)
+    return mid, lo, hi, con, width
 
 
 def step_crossing(profiles, offsets, *, side=4):
@@ -290,7 +269,13 @@ def _robust_line(x, y, *, iters=4, clip=3.0, floor=0.1):
     for _ in range(iters):
         if ok.sum() < 2:
             break
-        b, a = np.polyfit(x[ok], y[ok], 1)
+        xo, yo = x[ok], y[ok]
+        xm, ym = xo.mean(), yo.mean()
+        sxx = float(np.dot(xo - xm, xo - xm))
+        if not sxx > 0:
+            break
+        b = float(np.dot(xo - xm, yo - ym)) / sxx  # least squares, as np.polyfit(x, y, 1)
+        a = ym - b * xm
         res = y - (a + b * x)
         mad = 1.4826 * np.median(np.abs(res[ok] - np.median(res[ok])))
         rms = float(np.sqrt(np.mean(res[ok] ** 2)))
@@ -382,12 +367,12 @@ def detect_orientation(frame):
 def _transects(view, line, u, z0, z1, step=0.5, along=False):
     """Samples along transects across (default) or along the line: returns (N, K) and offsets."""
     offs = np.arange(z0, z1 + 1e-9, step)
-    u = np.asarray(u, float)
+    u = np.atleast_1d(np.asarray(u, float))
     if along:  # rows of constant z = u, samples along u = offs
-        pts = line.point(offs[None, :], u[:, None])
+        base, d = line.point(0.0, u), line.direction
     else:
-        pts = line.point(u[:, None], offs[None, :])
-    return view.sample(pts[..., 0], pts[..., 1]), offs
+        base, d = line.point(u, 0.0), line.normal
+    return view.transects(base, np.broadcast_to(d, base.shape), offs), offs
 
 
 def measure_line(view, line, u, *, polarity, thickness, window):
@@ -448,8 +433,7 @@ def measure_walls(view, line, well, *, thickness, window, n_rows=None):
     for name, u0, slope in (("left", well.u_left, well.slope_left), ("right", well.u_right, well.slope_right)):
         uc = u0 + slope * (zs - top)
         offs = np.arange(-window, window + 1e-9, 0.5)
-        pts = line.point(uc[:, None] + offs[None, :], zs[:, None])
-        prof = view.sample(pts[..., 0], pts[..., 1])
+        prof = view.transects(line.point(uc, zs), np.broadcast_to(line.direction, (len(zs), 2)), offs)
         pos, step = step_crossing(prof, offs)
         ucross = uc + pos
         a, b, rms, ok = _robust_line(zs - top, ucross, clip=2.5)

@@ -10,6 +10,8 @@ from __future__ import annotations
 import numpy as np
 from scipy import ndimage as ndi
 
+from osmobulge.imaging._kernels import viterbi_rows
+
 __all__ = ["sample_normals", "viterbi_path", "band_centres", "resample_polyline", "polyline_normals"]
 
 
@@ -82,28 +84,10 @@ def viterbi_path(score, max_step=1, penalty=0.0):
     ndarray of int, shape (N,)
         The best offset index per station.
     """
-    sc = np.nan_to_num(np.asarray(score, float), nan=0.0)
-    n, k = sc.shape
-    m = int(max_step)
-    pen = penalty * np.abs(np.arange(-m, m + 1))[::-1]  # window index i <-> move d = m - i
-    pad = np.full(k + 2 * m, -np.inf)
-    back = np.empty((n, k), np.int16)
-    back[0] = 0
-    acc = sc[0].copy()
-    view = np.lib.stride_tricks.sliding_window_view(pad, 2 * m + 1)  # (k, 2m+1), shares pad's memory
-    win = np.empty((k, 2 * m + 1))
-    rows = np.arange(k)
-    for i in range(1, n):
-        pad[m : m + k] = acc
-        np.subtract(view, pen, out=win)
-        j = win.argmax(axis=1)
-        acc = win[rows, j] + sc[i]
-        back[i] = m - j  # the move d: came from index (here - d)
-    path = np.empty(n, np.int64)
-    path[-1] = int(np.argmax(acc))
-    for i in range(n - 1, 0, -1):
-        path[i - 1] = path[i] - back[i, path[i]]
-    return path
+    sc = np.ascontiguousarray(np.nan_to_num(np.asarray(score, float), nan=0.0))
+    if sc.ndim != 2 or not sc.shape[0] or not sc.shape[1]:
+        raise ValueError(f"score must be a non-empty 2-D table, got shape {sc.shape}")
+    return viterbi_rows(sc, int(max_step), float(penalty))
 
 
 def band_centres(contrast, offsets, centre_index, *, half_window, level=0.5):

@@ -39,6 +39,7 @@ from skimage.registration import phase_cross_correlation
 from osmobulge.imaging._chamber import (
     ROTATIONS,
     ChamberGeometry,
+    _nanmedian,
     FrameView,
     band_edges,
     detect_orientation,
@@ -62,8 +63,13 @@ class TraceSettings:
     Parameters
     ----------
     search : float
-        Half-width of the band search along the guide's normals when tracking
-        from the previous frame (plus half the band thickness).
+        Half-width of the wide (dynamic-programming) band search along the
+        guide's normals (plus half the band thickness).
+    track_search : float
+        Smallest half-width of the fast tracking pass from the previous frame's
+        dome (no dynamic programming; widened to 1.5x the last frame-to-frame
+        motion, at most ``search``).  An unreliable tracked result falls back to
+        the wide search, then to the global guide.
     refine : float
         Half-width of the final sub-pixel pass.
     station_step : float
@@ -96,6 +102,7 @@ class TraceSettings:
     """
 
     search: float = 20.0
+    track_search: float = 8.0
     refine: float = 5.0
     station_step: float = 1.0
     sample_step: float = 0.5
@@ -140,6 +147,7 @@ class FrameTrace:
     points_u: np.ndarray = field(default_factory=lambda: np.zeros(0))  # accepted raw points
     points_z: np.ndarray = field(default_factory=lambda: np.zeros(0))
     source: str = "auto"
+    mode: str = ""  # how the dome was found: "track", "guide", "global" (or "" for manual / none)
     volume_left: float = np.nan
     volume_right: float = np.nan
     area_left: float = np.nan
@@ -163,12 +171,6 @@ class FrameTrace:
 
 
 # ---------------------------------------------------------------------------------- helpers
-def _nanmedian(a, **kw):
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)
-        return np.nanmedian(a, **kw)
-
-
 def _longest_run(mask, weights):
     """Largest sum of ``weights`` over a run of True in ``mask``."""
     best = cur = 0.0
@@ -238,6 +240,8 @@ class ChamberTracer:
         self.blur = self._estimate_blur(view)
         self._drift = np.zeros(2)  # (dx, dy) of the current frame w.r.t. the first, view px
         self.prev = None  # last good FrameTrace
+        self._motion = self.settings.search  # px, last frame-to-frame motion of the dome
+        self._tracking = False  # the last frame processed was good: start from its geometry
         self.priors = {}  # frame index -> (u, z) guide in chamber px
         # flat-line columns: away from every well's rim
         self._flat_u = self._flat_columns(view)
@@ -338,8 +342,8 @@ class ChamberTracer:
                                       ("u_right", well.u_right, well.slope_right, -self._wall_sign)):
             offs = np.arange(-span, span + 1e-9, 1.0)
             uc = u0 + slope * (zs - top)
-            pts = line.point(uc[:, None] + offs[None, :], zs[:, None])
-            prof = _nanmedian(view.sample(pts[..., 0], pts[..., 1]), axis=0)
+            prof = _nanmedian(view.transects(line.point(uc, zs), np.broadcast_to(line.direction, (len(zs), 2)), offs),
+                              axis=0)
             if not np.all(np.isfinite(prof)):
                 return well
             grad = sign * np.gradient(ndi.gaussian_filter1d(prof, 1.0))
@@ -347,11 +351,26 @@ class ChamberTracer:
         return replace(well, **out)
 
     def measure_geometry(self, view):
-        """Drift, flat line, walls and rim of the chamber in one frame (a :class:`ChamberGeometry`)."""
-        g0 = self.ref
+        """Drift, flat line, walls and rim of the chamber in one frame (a :class:`ChamberGeometry`).
+
+        While tracking (the last frame was good) the chamber is looked for where
+        the last frame put it (the wide line and wall searches absorb a drift of
+        up to ``max_drift``); the phase correlation of the base runs first
+        otherwise, and again when the tracked geometry is implausible (walls
+        lost, or the rim radius jumped).
+        """
+        if self._tracking and self.prev is not None and self.prev.geometry is not None:
+            geom, drift = self._geometry_at(view, self._drift.copy())
+            gp = self.prev.geometry
+            if geom is not None and abs(geom.rim_radius - gp.rim_radius) <= 2.0 + 0.02 * gp.rim_radius:
+                return geom, drift
         drift = self._register(view)
         if not np.all(np.isfinite(drift)) or np.hypot(*(drift - self._drift)) > self.settings.max_drift:
             drift = self._drift.copy()
+        return self._geometry_at(view, drift)
+
+    def _geometry_at(self, view, drift):
+        g0 = self.ref
         line = replace(g0.line, x0=g0.line.x0 + drift[0], y0=g0.line.y0 + drift[1])
         well = g0.well
         if self.prev is not None and self.prev.geometry is not None:
@@ -430,20 +449,26 @@ class ChamberTracer:
         return np.c_[pu, pz], 1.5 * f + 2.0
 
     # ---------------------------------------------------------------------- refinement
-    def _refine(self, view, g, guide_uz, half, *, dp=True, width=None):
-        """One pass along the guide's normals: band midline offsets and station data."""
+    def _refine(self, view, g, guide_uz, half, *, dp=True, width=None, coarse=False):
+        """One pass along the guide's normals: band midline offsets and station data.
+
+        ``dp``: wide pass choosing a smooth path through the band by dynamic
+        programming; else the peak is looked for within ``half`` of the guide
+        (or, with ``width``, within the band's half-width).  ``coarse``: stations
+        twice as far apart (the wide and the first tracking pass).
+        """
         st = self.settings
         guide = g.line.point(guide_uz[:, 0], guide_uz[:, 1])
         # the wide dynamic-programming pass samples twice as coarsely as the final ones
         step, sstep = (2.0 * st.station_step, 2.0 * st.sample_step) if dp else (st.station_step, st.sample_step)
+        if coarse:
+            step = 2.0 * st.station_step
         pts, s = resample_polyline(guide, step)
         nrm = polyline_normals(pts, smooth=2.0 / step)
         # normals point to the left of travel; travel is left rim -> right rim, so "left" is outward (up)
         w = half + 0.5 * g.thickness
         offs = np.arange(-w, w + 1e-9, sstep)
-        x = pts[:, 0:1] + offs[None, :] * nrm[:, 0:1]
-        y = pts[:, 1:2] + offs[None, :] * nrm[:, 1:2]
-        prof = view.sample(x, y)
+        prof = view.transects(pts, nrm, offs)
         if not np.all(np.isfinite(prof)):
             prof = np.where(np.isfinite(prof), prof, _nanmedian(prof))
         prof = ndi.gaussian_filter1d(prof, 1.0 / step, axis=0, mode="nearest")
@@ -483,22 +508,31 @@ class ChamberTracer:
         zc = g.thickness + 3.0
         return (np.abs(u) > R - 1.0) & (z < zc)
 
-    def trace_dome(self, view, g, guide=None):
-        """Trace the dome given the frame geometry; returns a dict of results (chamber px)."""
+    def trace_dome(self, view, g, guide=None, *, track=False):
+        """Trace the dome given the frame geometry; returns a dict of results (chamber px).
+
+        Escalates until a result is trustworthy: a narrow tracking pass from
+        ``guide`` (``track``: the previous frame's dome), the wide dynamic-programming
+        search from ``guide``, then the global guide.
+        """
         st = self.settings
         R = g.rim_radius
-        tried_global = False
         if guide is None:
-            res = self._global_guide(view, g)
-            if res is None:
-                return None
-            guide, half = res
-            tried_global = True
+            attempts = ["global"]
         else:
-            half = st.search
+            attempts = (["track"] if track else []) + ["guide", "global"]
         out = None
-        for _attempt in range(2):
-            gu = np.asarray(guide, float)
+        for mode in attempts:
+            if mode == "global":
+                res = self._global_guide(view, g)
+                if res is None:
+                    break
+                gu, half = res
+            else:
+                gu = guide
+                half = st.search if mode == "guide" else float(np.clip(1.5 * self._motion + 2.0, st.track_search,
+                                                                        st.search))
+            gu = np.asarray(gu, float)
             # guide from rim to rim through the current rim points
             keep = ~self._exclusion(g, gu[:, 0], gu[:, 1])
             gu = gu[keep]
@@ -507,16 +541,16 @@ class ChamberTracer:
             if gu[0, 0] > gu[-1, 0]:
                 gu = gu[::-1]
             gu = np.concatenate([[[-R, 0.0]], gu, [[R, 0.0]]])
-            out = self._passes(view, g, gu, half)
-            if out is not None and self._trustworthy(out):
+            res = self._passes(view, g, gu, half, track=mode == "track")
+            if res is not None:
+                res["mode"] = mode
+            if mode == "track":
+                if res is not None and self._trustworthy(res):
+                    return res
+                continue
+            out = res
+            if out is not None and (mode == "global" or self._trustworthy(out)):
                 break
-            if tried_global:
-                break
-            res = self._global_guide(view, g)
-            if res is None:
-                break
-            guide, half = res
-            tried_global = True
         return out
 
     def _trustworthy(self, tr):
@@ -636,20 +670,31 @@ class ChamberTracer:
         curve, _ = self._robust_fit(U, Z, max(ks, 8.0), final=False)
         return curve
 
-    def _passes(self, view, g, guide_uz, half):
+    @staticmethod
+    def _offset_guide(g, r):
+        """Next guide of a tracking pass: the stations moved by their smoothed band offsets (chamber px)."""
+        use = r["use"]
+        mid = np.interp(np.arange(len(use)), np.flatnonzero(use), r["mid"][use])
+        mid = ndi.gaussian_filter1d(ndi.median_filter(mid, 9, mode="nearest"), 2.0, mode="nearest")
+        pu, pz = g.line.coords(r["station_pts"] + mid[:, None] * r["normals"])
+        return np.c_[pu, pz]
+
+    def _passes(self, view, g, guide_uz, half, *, track=False):
         st = self.settings
         R = g.rim_radius
         ref_con = abs(g.contrast) if np.isfinite(g.contrast) else None
-        # pass 1: wide search with dynamic programming; a robust stiff spline gives the next guide
-        r = self._refine(view, g, guide_uz, half, dp=True)
+        # pass 1: wide search with dynamic programming and a robust stiff spline for the next guide, or
+        # (tracking from the last frame) a narrow search and the stations moved by their smoothed offsets
+        r = self._refine(view, g, guide_uz, half, dp=not track, coarse=track)
         if ref_con is None:
             ref_con = float(np.nanpercentile(r["contrast"], 90))
         r = self._clean(g, r, ref_con)
         use = r["use"]
         if use.sum() < 6:
             return None
+        motion = float(np.percentile(np.abs(r["mid"][use]), 90))
         ks = float(np.clip(4.0 + 10.0 * r["sigma"], 4.0, 15.0))
-        uz = self._guide_from(g, r, ks)
+        uz = self._offset_guide(g, r) if track else self._guide_from(g, r, ks)
         # pass 2: narrow search around the previous curve, repeated until it stops moving
         wd = np.where(use, r["width"], np.nan)
         ok_w = np.isfinite(wd)
@@ -665,8 +710,9 @@ class ChamberTracer:
             moved = float(np.percentile(np.abs(r["mid"][use]), 90))
             if moved < 1.0:
                 break
-            uz = self._guide_from(g, r, ks)
+            uz = self._offset_guide(g, r) if track else self._guide_from(g, r, ks)
         r["converged"] = moved < 1.0
+        r["motion"] = motion
         pu, pz = r["pu"][use], r["pz"][use]
         bl, br = self._bridge(g, pu, pz, -1.0), self._bridge(g, pu, pz, 1.0)
         U = np.r_[-R, bl[:, 0], pu, br[::-1, 0], R]
@@ -862,6 +908,7 @@ class ChamberTracer:
         view = FrameView(frame, self.k)
         out = FrameTrace(index=index)
         g, drift = self.measure_geometry(view)
+        self._tracking = False  # until this frame proves good
         out.drift = (float(drift[0]), float(drift[1]))
         if g is None:
             out.message = "chamber walls not found"
@@ -873,12 +920,14 @@ class ChamberTracer:
         if manual is not None:
             return self._from_points(view, g, out, manual)
         guide_uz = None
+        track = False
         if guide is not None:
             gx, gy = view.from_frame(np.asarray(guide)[:, 1], np.asarray(guide)[:, 0])
             guide_uz = np.c_[g.line.coords(np.c_[gx, gy])]
         elif self.prev is not None and self.prev.flag == "ok" and len(self.prev.u):
             guide_uz = np.c_[self.prev.u, self.prev.z]
-        tr = self.trace_dome(view, g, guide_uz)
+            track = True
+        tr = self.trace_dome(view, g, guide_uz, track=track)
         if tr is None:
             out.message = "no dome traced"
             out.figures = {"dome_contrast": 0.0, "well_membrane": self._well_membrane(view, g)}
@@ -897,8 +946,11 @@ class ChamberTracer:
         out.figures.update(fig)
         out.flag, out.flag_figure, out.flag_value = self._flag(out.figures)
         out.ok = True
+        out.mode = tr["mode"]
         if out.flag == "ok":
             self.prev = out
+            self._motion = tr["motion"] if tr["mode"] == "track" else self.settings.search
+            self._tracking = True
         return out
 
     def _measure(self, out):
@@ -933,6 +985,7 @@ class ChamberTracer:
         out.flag, out.flag_figure, out.flag_value = "ok", "", np.nan
         out.ok = True
         self.prev = out  # a person's profile guides the trace of the next frames
+        self._tracking = True
         return out
 
 

@@ -100,9 +100,9 @@ def test_manual_profiles_and_priors(monkeypatch):
     guides = {}
     original = trace.ChamberTracer.trace_dome
 
-    def spy(self, view, g, guide=None):
+    def spy(self, view, g, guide=None, **kw):
         guides[len(guides)] = None if guide is None else np.asarray(guide).copy()
-        return original(self, view, g, guide)
+        return original(self, view, g, guide, **kw)
 
     monkeypatch.setattr(trace.ChamberTracer, "trace_dome", spy)
     prior = extract(s.frames, pixel_size=1e-6, frame_interval=60.0, chamber=CH, progress=False,

@@ -1,0 +1,187 @@
+"""Compiled inner loops of the tracer (numba): transect sampling, band edges, the smooth path.
+
+Each kernel does what a short numpy/scipy expression does (named in its
+docstring, and checked against it in ``tests/imaging/test_kernels.py``) without
+the temporary arrays and the per-call overhead that dominate a frame's tracing
+time.  Compiled on first use and cached on disk (``cache=True``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+__all__ = ["sample_transects", "band_edges_rows", "viterbi_rows"]
+
+
+@njit(cache=True, nogil=True)
+def _sample_transects(frame, k, px, py, dx, dy, offsets, out):
+    h, w = frame.shape
+    n, m = out.shape
+    for i in range(n):
+        for j in range(m):
+            x = px[i] + offsets[j] * dx[i]
+            y = py[i] + offsets[j] * dy[i]
+            if k == 0:
+                r, c = y, x
+            elif k == 1:
+                r, c = x, w - 1.0 - y
+            elif k == 2:
+                r, c = h - 1.0 - y, w - 1.0 - x
+            else:
+                r, c = h - 1.0 - x, y
+            if not (r >= 0.0 and r <= h - 1.0 and c >= 0.0 and c <= w - 1.0):
+                out[i, j] = np.nan
+                continue
+            r0 = min(int(r), h - 2) if h > 1 else 0
+            c0 = min(int(c), w - 2) if w > 1 else 0
+            fr = r - r0
+            fc = c - c0
+            r1 = min(r0 + 1, h - 1)
+            c1 = min(c0 + 1, w - 1)
+            a = frame[r0, c0] * (1.0 - fc) + frame[r0, c1] * fc
+            b = frame[r1, c0] * (1.0 - fc) + frame[r1, c1] * fc
+            out[i, j] = a * (1.0 - fr) + b * fr
+
+
+def sample_transects(frame, k, points, directions, offsets):
+    """Bilinear samples of ``frame`` seen rotated by ``k`` quarter turns along transects.
+
+    ``FrameView(frame, k).sample(points[:, None, :] + offsets[None, :, None] * directions[:, None, :])``:
+    the view point ``points[i] + offsets[j] * directions[i]`` (``(x=col, y=row)``,
+    px) sampled bilinearly, nan outside the frame.
+
+    Returns
+    -------
+    ndarray of float64, shape (N, K)
+    """
+    frame = np.ascontiguousarray(frame)
+    if frame.dtype == np.bool_:
+        frame = frame.astype(np.uint8)
+    p = np.ascontiguousarray(points, np.float64).reshape(-1, 2)
+    d = np.ascontiguousarray(directions, np.float64).reshape(-1, 2)
+    o = np.ascontiguousarray(offsets, np.float64).ravel()
+    out = np.empty((len(p), len(o)), np.float64)
+    _sample_transects(frame, int(k) % 4, p[:, 0].copy(), p[:, 1].copy(), d[:, 0].copy(), d[:, 1].copy(), o, out)
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _clip01(t):
+    """``np.clip(t, 0, 1)``, nan kept."""
+    if t < 0.0:
+        return 0.0
+    if t > 1.0:
+        return 1.0
+    return t
+
+
+@njit(cache=True, nogil=True)
+def _median_small(a, lo, hi, buf):
+    """Median of ``a[lo:hi]`` (insertion sort in ``buf``: a few samples)."""
+    m = hi - lo
+    for i in range(m):
+        v = a[lo + i]
+        j = i
+        while j > 0 and buf[j - 1] > v:
+            buf[j] = buf[j - 1]
+            j -= 1
+        buf[j] = v
+    if m % 2:
+        return buf[m // 2]
+    return 0.5 * (buf[m // 2 - 1] + buf[m // 2])
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _band_edges_rows(q, offsets, centre, search, side, out):
+    n, k = q.shape
+    buf = np.empty(max(side, 1), np.float64)
+    for i in range(n):
+        row = q[i]
+        # peak in the window (first maximum, as np.argmax)
+        c = centre[i]
+        s = search[i]
+        ipk = -1
+        best = -np.inf
+        for j in range(max(c - s, 0), min(c + s + 1, k)):
+            if row[j] > best:
+                best = row[j]
+                ipk = j
+        if ipk < 0:
+            ipk = 0
+        peak = row[ipk]
+        left = _median_small(row, 0, side, buf)
+        right = _median_small(row, k - side, k, buf)
+        lev = 0.5 * (peak + left)
+        lo = np.nan
+        for j in range(ipk - 1, -1, -1):
+            if row[j] < lev:
+                j0 = j + 1
+                t = (row[j0] - lev) / (row[j0] - row[j])
+                t = _clip01(t)
+                lo = offsets[j0] + t * (offsets[j] - offsets[j0])
+                break
+        lev = 0.5 * (peak + right)
+        hi = np.nan
+        for j in range(ipk + 1, k):
+            if row[j] < lev:
+                j0 = j - 1
+                t = (row[j0] - lev) / (row[j0] - row[j])
+                t = _clip01(t)
+                hi = offsets[j0] + t * (offsets[j] - offsets[j0])
+                break
+        out[0, i] = 0.5 * (lo + hi)
+        out[1, i] = lo
+        out[2, i] = hi
+        out[3, i] = peak - 0.5 * (left + right)
+        out[4, i] = hi - lo
+
+
+def band_edges_rows(q, offsets, centre, search, side):
+    """Band edges of finite profiles ``q`` (band high): the loop of :func:`osmobulge.imaging._chamber.band_edges`.
+
+    Returns
+    -------
+    ndarray of shape (5, N)
+        Midline, lower and upper edge, contrast and width per row.
+    """
+    q = np.ascontiguousarray(q, np.float64)
+    n, k = q.shape
+    out = np.empty((5, n), np.float64)
+    c = np.ascontiguousarray(np.broadcast_to(np.asarray(centre, np.int64), (n,)))
+    s = np.ascontiguousarray(np.broadcast_to(np.asarray(search, np.int64), (n,)))
+    _band_edges_rows(q, np.ascontiguousarray(offsets, np.float64), c, s, int(min(max(side, 1), k)), out)
+    return out
+
+
+@njit(cache=True, nogil=True)
+def viterbi_rows(sc, m, penalty):
+    """Best path through ``sc`` (N, K) with moves of at most ``m`` and a cost ``penalty`` per unit move.
+
+    The loop of :func:`osmobulge.imaging._normals.viterbi_path` (same tie-breaking).
+    """
+    n, k = sc.shape
+    back = np.zeros((n, k), np.int64)
+    acc = sc[0].copy()
+    new = np.empty(k, np.float64)
+    for i in range(1, n):
+        for q in range(k):
+            best = -np.inf
+            bj = 0
+            for j in range(2 * m + 1):  # window index j <-> move d = m - j, source q - d
+                src = q - m + j
+                if src < 0 or src >= k:
+                    v = -np.inf
+                else:
+                    v = acc[src] - penalty * abs(m - j)
+                if v > best:
+                    best = v
+                    bj = j
+            new[q] = best + sc[i, q]
+            back[i, q] = m - bj
+        acc[:] = new
+    path = np.empty(n, np.int64)
+    path[n - 1] = np.argmax(acc)
+    for i in range(n - 1, 0, -1):
+        path[i - 1] = path[i] - back[i, path[i]]
+    return path

@@ -1,0 +1,171 @@
+"""The compiled kernels against the numpy/scipy expressions they replace (the reference code is kept here)."""
+
+import numpy as np
+import pytest
+from scipy import ndimage as ndi
+
+from osmobulge.imaging._chamber import FrameView, band_edges
+from osmobulge.imaging._kernels import sample_transects
+from osmobulge.imaging._normals import viterbi_path
+from osmobulge.imaging.synthetic import render_frame
+
+
+# ------------------------------------------------------------------------ numpy references (the former code)
+def _take(a, idx):
+    return np.take_along_axis(a, np.clip(idx, 0, a.shape[1] - 1)[:, None], axis=1)[:, 0]
+
+
+def _ref_crossing(q, offsets, level, start, direction):
+    n, k = q.shape
+    cols = np.arange(k)[None, :]
+    below = q < level[:, None]
+    if direction > 0:
+        cand = np.where(below & (cols > start[:, None]), cols, k)
+        j = cand.min(axis=1)
+        ok = j < k
+        j0, j1 = np.clip(j - 1, 0, k - 1), np.clip(j, 0, k - 1)
+    else:
+        cand = np.where(below & (cols < start[:, None]), cols, -1)
+        j = cand.max(axis=1)
+        ok = j >= 0
+        j0, j1 = np.clip(j + 1, 0, k - 1), np.clip(j, 0, k - 1)
+    q0, q1 = _take(q, j0), _take(q, j1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        t = np.clip((q0 - level) / (q0 - q1), 0.0, 1.0)
+    out = offsets[j0] + t * (offsets[j1] - offsets[j0])
+    out[~ok] = np.nan
+    return out
+
+
+def ref_band_edges(profiles, offsets, polarity, *, centre=None, search=None, side=4):
+    q = polarity * -np.asarray(profiles, float)
+    n, k = q.shape
+    if not np.all(np.isfinite(q)):
+        fill = np.nanmedian(q, axis=1, keepdims=True) if n else 0.0
+        q = np.where(np.isfinite(q), q, np.nan_to_num(fill, nan=0.0))
+    cols = np.arange(k)
+    if centre is None:
+        ipk = np.argmax(q, axis=1)
+    else:
+        c = np.asarray(centre, int)
+        s = np.full(n, k) if search is None else np.broadcast_to(np.asarray(search), (n,)).astype(int)
+        win = np.abs(cols[None, :] - c[:, None]) <= s[:, None]
+        ipk = np.argmax(np.where(win, q, -np.inf), axis=1)
+    peak = _take(q, ipk)
+    left = np.median(q[:, :side], axis=1)
+    right = np.median(q[:, -side:], axis=1)
+    lo = _ref_crossing(q, offsets, 0.5 * (peak + left), ipk, -1)
+    hi = _ref_crossing(q, offsets, 0.5 * (peak + right), ipk, +1)
+    return 0.5 * (lo + hi), lo, hi, peak - 0.5 * (left + right), hi - lo
+
+
+def ref_viterbi_path(score, max_step=1, penalty=0.0):
+    sc = np.nan_to_num(np.asarray(score, float), nan=0.0)
+    n, k = sc.shape
+    m = int(max_step)
+    pen = penalty * np.abs(np.arange(-m, m + 1))[::-1]  # window index i <-> move d = m - i
+    pad = np.full(k + 2 * m, -np.inf)
+    back = np.empty((n, k), np.int16)
+    back[0] = 0
+    acc = sc[0].copy()
+    view = np.lib.stride_tricks.sliding_window_view(pad, 2 * m + 1)  # (k, 2m+1), shares pad's memory
+    win = np.empty((k, 2 * m + 1))
+    rows = np.arange(k)
+    for i in range(1, n):
+        pad[m : m + k] = acc
+        np.subtract(view, pen, out=win)
+        j = win.argmax(axis=1)
+        acc = win[rows, j] + sc[i]
+        back[i] = m - j  # the move d: came from index (here - d)
+    path = np.empty(n, np.int64)
+    path[-1] = int(np.argmax(acc))
+    for i in range(n - 1, 0, -1):
+        path[i - 1] = path[i] - back[i, path[i]]
+    return path
+
+
+# ------------------------------------------------------------------------ tests
+@pytest.mark.parametrize("k", range(4))
+@pytest.mark.parametrize("dtype", [np.uint8, np.uint16, np.float32, np.float64])
+def test_sample_transects_equals_map_coordinates(k, dtype):
+    rng = np.random.default_rng(k)
+    frame = (rng.random((37, 53)) * 200).astype(dtype)
+    view = FrameView(frame, k)
+    h, w = view.shape
+    pts = np.c_[rng.uniform(-3, w + 2, 40), rng.uniform(-3, h + 2, 40)]
+    ang = rng.uniform(0, 2 * np.pi, 40)
+    d = np.c_[np.cos(ang), np.sin(ang)]
+    offs = np.linspace(-6.0, 6.0, 25)
+    got = sample_transects(frame, k, pts, d, offs)
+    x = pts[:, :1] + offs[None, :] * d[:, :1]
+    y = pts[:, 1:] + offs[None, :] * d[:, 1:]
+    want = view.sample(x, y)  # scipy.ndimage.map_coordinates, order 1
+    inside = (x >= 0) & (x <= w - 1) & (y >= 0) & (y <= h - 1)
+    assert inside.mean() > 0.5 and (~inside).any()
+    np.testing.assert_allclose(got[inside], want[inside], rtol=1e-12, atol=1e-9)
+    far = (x < -1) | (x > w) | (y < -1) | (y > h)
+    assert np.isnan(got[far]).all() and np.isnan(got[~inside]).all()
+    # exactly on the last row/column: the pixel value, not nan
+    corner = sample_transects(frame, k, np.array([[w - 1.0, h - 1.0]]), np.array([[1.0, 0.0]]), np.zeros(1))
+    assert corner[0, 0] == view.sample(np.array(w - 1.0), np.array(h - 1.0))
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_band_edges_equals_numpy_reference(seed):
+    rng = np.random.default_rng(seed)
+    n, k = 300, 61
+    offs = np.linspace(-15, 15, k)
+    centre = rng.uniform(-8, 8, n)
+    width = rng.uniform(2, 20, n)
+    prof = 100 + 30 * np.tanh(offs / 5)[None, :] - 50 * np.exp(-0.5 * ((offs[None, :] - centre[:, None]) / (0.3 * width[:, None])) ** 2)
+    prof = ndi.gaussian_filter1d(prof + rng.normal(0, 3, prof.shape), 1.0, axis=1)
+    prof[::17, ::13] = np.nan  # non-finite samples are filled with the row median
+    prof[5] = 100.0  # a flat row: no crossing, nan edges
+    for pol in (1, -1):
+        p = prof if pol == 1 else 200 - prof
+        ci = rng.integers(0, k, n)
+        for kw in ({}, {"centre": ci, "search": 6}, {"centre": ci, "search": rng.integers(0, 40, n)},
+                   {"centre": ci, "search": None}):
+            got = band_edges(p, offs, pol, side=4, **kw)
+            want = ref_band_edges(p, offs, pol, side=4, **kw)
+            for g, w_ in zip(got, want, strict=True):
+                np.testing.assert_allclose(g, w_, rtol=1e-12, atol=1e-12, equal_nan=True)
+    assert np.isfinite(got[0]).mean() > 0.8
+
+
+def test_band_edges_on_a_rendered_membrane():
+    """Real transects across a rendered frame's flat band: identical to the reference."""
+    frame = render_frame(1.0, chamber=(200e-6, 110e-6, 20e-6), seed=1)
+    view = FrameView(frame, 0)
+    cols = np.arange(20.0, 1000.0, 7.0)
+    rows = np.arange(300.0, 700.0, 0.5)
+    prof = view.sample(cols[:, None] + 0 * rows[None, :], rows[None, :] + 0 * cols[:, None])
+    for pol in (1, -1):
+        got = band_edges(prof, rows, pol)
+        want = ref_band_edges(prof, rows, pol)
+        for g, w_ in zip(got, want, strict=True):
+            np.testing.assert_allclose(g, w_, rtol=1e-12, atol=1e-12, equal_nan=True)
+
+
+@pytest.mark.parametrize("max_step,penalty", [(1, 0.0), (2, 0.3), (4, 0.1)])
+def test_viterbi_equals_numpy_reference(max_step, penalty):
+    rng = np.random.default_rng(max_step)
+    sc = rng.normal(size=(120, 33))
+    sc[rng.random(sc.shape) < 0.05] = np.nan
+    sc[:, 10] += 1.5  # a ridge to follow
+    np.testing.assert_array_equal(viterbi_path(sc, max_step, penalty), ref_viterbi_path(sc, max_step, penalty))
+    # ties (integer scores) break the same way
+    ti = rng.integers(0, 3, (60, 9)).astype(float)
+    np.testing.assert_array_equal(viterbi_path(ti, max_step, penalty), ref_viterbi_path(ti, max_step, penalty))
+
+
+def test_band_edges_degenerate_rows_match_reference():
+    """Equal neighbours at the crossing (0/0) and a band weaker than its sides give nan exactly as numpy."""
+    offs = np.arange(9.0)
+    prof = np.array([[5, 5, 5, 1, 5, 5, 5, 5, 5], [0, 0, 0, 0, 9, 0, 0, 0, 0], [3, 3, 2, 2, 1, 2, 2, 3, 3],
+                     [1, 1, 1, 1, 1, 1, 1, 1, 1]], float)
+    for pol in (1, -1):
+        got = band_edges(prof, offs, pol, side=2)
+        want = ref_band_edges(prof, offs, pol, side=2)
+        for g, w_ in zip(got, want, strict=True):
+            np.testing.assert_allclose(g, w_, rtol=1e-12, atol=1e-12, equal_nan=True)
