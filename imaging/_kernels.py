@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["sample_transects", "band_edges_rows", "viterbi_rows"]
+__all__ = ["sample_transects", "band_edges_rows", "viterbi_rows", "lsq_spline"]
 
 
 @njit(cache=True, nogil=True)
@@ -185,3 +185,114 @@ def viterbi_rows(sc, m, penalty):
     for i in range(n - 1, 0, -1):
         path[i - 1] = path[i] - back[i, path[i]]
     return path
+
+
+@njit(cache=True, nogil=True)
+def _lsq_normal(x, y, t, w, ata, aty):
+    """Banded normal equations of the cubic least-squares spline (weights multiply the residuals)."""
+    n = ata.shape[0]
+    nd = y.shape[1]
+    b = np.empty(4)
+    left = np.empty(4)
+    right = np.empty(4)
+    for i in range(x.shape[0]):
+        wi = w[i] * w[i]
+        if wi == 0.0:
+            continue
+        xi = x[i]
+        # span l with t[l] <= x < t[l+1], 3 <= l <= n - 1 (the last point in the last span)
+        lo, hi = 3, n
+        while hi - lo > 1:
+            mid = (lo + hi) // 2
+            if t[mid] <= xi:
+                lo = mid
+            else:
+                hi = mid
+        l = lo
+        # de Boor-Cox: the 4 non-zero cubic B-splines N_{l-3..l}(x)
+        b[0] = 1.0
+        for j in range(1, 4):
+            left[j] = xi - t[l + 1 - j]
+            right[j] = t[l + j] - xi
+            saved = 0.0
+            for r in range(j):
+                den = right[r + 1] + left[j - r]
+                tmp = b[r] / den if den != 0.0 else 0.0
+                b[r] = saved + right[r + 1] * tmp
+                saved = left[j - r] * tmp
+            b[j] = saved
+        for a in range(4):
+            ia = l - 3 + a
+            for c in range(a, 4):
+                ata[ia, c - a] += wi * b[a] * b[c]
+            for d in range(nd):
+                aty[ia, d] += wi * b[a] * y[i, d]
+
+
+@njit(cache=True, nogil=True)
+def _band_cholesky_solve(ata, aty):
+    """Solve the symmetric positive definite band system (upper bands in columns); False if not positive."""
+    n, m = ata.shape
+    nd = aty.shape[1]
+    L = np.zeros((n, m))
+    for i in range(n):
+        for j in range(max(0, i - m + 1), i + 1):
+            s = ata[j, i - j]
+            for p in range(max(0, i - m + 1), j):
+                if i - p < m and j - p < m:
+                    s -= L[p, i - p] * L[p, j - p]
+            if i == j:
+                if not s > 0.0:
+                    return False
+                L[i, 0] = np.sqrt(s)
+            else:
+                L[j, i - j] = s / L[j, 0]
+    for d in range(nd):  # forward, then back substitution
+        for i in range(n):
+            s = aty[i, d]
+            for p in range(max(0, i - m + 1), i):
+                s -= L[p, i - p] * aty[p, d]
+            aty[i, d] = s / L[i, 0]
+        for i in range(n - 1, -1, -1):
+            s = aty[i, d]
+            for p in range(i + 1, min(n, i + m)):
+                s -= L[i, p - i] * aty[p, d]
+            aty[i, d] = s / L[i, 0]
+    return True
+
+
+def lsq_spline(x, y, t, w=None):
+    """Cubic least-squares spline: :func:`scipy.interpolate.make_lsq_spline` ``(x, y, t, k=3, w=w)``.
+
+    Normal equations in band form with a Cholesky solve (the B-spline basis on
+    knots at data quantiles is well conditioned); falls back to scipy's QR
+    solver when the system is not positive definite (a knot span without data).
+
+    Parameters
+    ----------
+    x : ndarray of shape (N,)
+        Increasing abscissae inside ``[t[3], t[-4]]``.
+    y : ndarray of shape (N,) or (N, D)
+    t : ndarray
+        Knots, 4-fold at both ends.
+    w : ndarray of shape (N,), optional
+        Weights multiplying the residuals (0 drops a point).
+
+    Returns
+    -------
+    scipy.interpolate.BSpline
+    """
+    from scipy.interpolate import BSpline, make_lsq_spline
+
+    x = np.ascontiguousarray(x, np.float64)
+    y_in = np.asarray(y, np.float64)
+    y2 = np.ascontiguousarray(y_in.reshape(len(x), -1))
+    t = np.ascontiguousarray(t, np.float64)
+    ww = np.ones(len(x)) if w is None else np.ascontiguousarray(w, np.float64)
+    n = len(t) - 4
+    ata = np.zeros((n, 4))
+    aty = np.zeros((n, y2.shape[1]))
+    _lsq_normal(x, y2, t, ww, ata, aty)
+    if not _band_cholesky_solve(ata, aty) or not np.all(np.isfinite(aty)):
+        return make_lsq_spline(x, y_in, t, k=3, w=w)
+    return BSpline(t, aty.reshape((n, *y_in.shape[1:])), 3)

@@ -26,6 +26,8 @@ import numpy as np
 from scipy import interpolate
 from skimage import measure
 
+from osmobulge.imaging._kernels import lsq_spline
+
 __all__ = [
     "EllipseFit",
     "ellipse_distance",
@@ -352,7 +354,7 @@ def smooth_profile(points, *, sigma=None, smoothing=None, weights=None, knot_spa
         # interior knots at quantiles of the data: every knot span holds points (Schoenberg-Whitney)
         inner = np.quantile(u[1:-1], np.linspace(0.0, 1.0, n_int + 2)[1:-1]) if n_int else np.zeros(0)
         t = np.r_[[0.0] * 4, inner, [1.0] * 4]
-        lsq = interpolate.make_lsq_spline(u, pts_ok, t, k=3, w=ww)
+        lsq = lsq_spline(u, pts_ok, t, ww)
         spl = interpolate.BSpline(lsq.t, lsq.c.T, 3, axis=1)
     else:
         spl, u = interpolate.make_splprep(pts_ok.T, u=u, s=float(smoothing), w=ww, k=3)

@@ -47,6 +47,7 @@ from osmobulge.imaging._chamber import (
     measure_line,
     measure_walls,
 )
+from osmobulge.imaging._kernels import lsq_spline
 from osmobulge.imaging._normals import polyline_normals, resample_polyline, viterbi_path
 from osmobulge.imaging.geometry import revolution_measures, smooth_profile
 
@@ -617,14 +618,12 @@ class ChamberTracer:
     @staticmethod
     def _lsq(u, pts, w, spacing):
         """Least-squares cubic spline of pts (N, 2) over parameter u with knots at data quantiles."""
-        from scipy.interpolate import make_lsq_spline
-
         sel = w > 0
         chord = float(np.sum(np.hypot(*np.diff(pts[sel], axis=0).T)))
         n_int = int(np.clip(np.floor(chord / spacing), 0, max(int(sel.sum()) - 4, 0)))
         inner = np.quantile(u[sel][1:-1], np.linspace(0.0, 1.0, n_int + 2)[1:-1]) if n_int else np.zeros(0)
         t = np.r_[[u[0]] * 4, inner, [u[-1]] * 4]
-        return make_lsq_spline(u, pts, t, k=3, w=w)
+        return lsq_spline(u, pts, t, w)
 
     @classmethod
     def _robust_fit(cls, U, Z, ks, *, pinned=True, final=True):

@@ -169,3 +169,42 @@ def test_band_edges_degenerate_rows_match_reference():
         want = ref_band_edges(prof, offs, pol, side=2)
         for g, w_ in zip(got, want, strict=True):
             np.testing.assert_allclose(g, w_, rtol=1e-12, atol=1e-12, equal_nan=True)
+
+
+@pytest.mark.parametrize("n_knots", [0, 5, 150])
+def test_lsq_spline_equals_scipy(n_knots):
+    from scipy.interpolate import make_lsq_spline
+
+    from osmobulge.imaging._kernels import lsq_spline
+
+    rng = np.random.default_rng(n_knots)
+    x = np.sort(rng.uniform(0, 1, 900))
+    x[[0, -1]] = 0.0, 1.0
+    y = np.c_[np.sin(6 * x), np.cos(3 * x)] + rng.normal(0, 0.01, (900, 2))
+    w = rng.uniform(0.5, 2, 900)
+    w[rng.random(900) < 0.1] = 0.0  # dropped points
+    inner = np.quantile(x[w > 0][1:-1], np.linspace(0, 1, n_knots + 2)[1:-1])
+    t = np.r_[[0.0] * 4, inner, [1.0] * 4]
+    want, got = make_lsq_spline(x, y, t, k=3, w=w), lsq_spline(x, y, t, w)
+    np.testing.assert_allclose(got.c, want.c, rtol=0, atol=1e-10)
+    np.testing.assert_allclose(got(x), want(x), rtol=0, atol=1e-10)
+    got1 = lsq_spline(x, y[:, 0], t)  # 1-D data, no weights
+    np.testing.assert_allclose(got1(x), make_lsq_spline(x, y[:, 0], t, k=3)(x), rtol=0, atol=1e-10)
+
+
+def test_lsq_spline_falls_back_on_an_empty_knot_span():
+    """A knot span without data: the normal equations are singular, scipy's QR answer is returned."""
+    from scipy.interpolate import make_lsq_spline
+
+    from osmobulge.imaging._kernels import lsq_spline
+
+    x = np.r_[np.linspace(0, 0.3, 20), np.linspace(0.7, 1, 20)]
+    y = x**2
+    t = np.r_[[0.0] * 4, np.arange(0.35, 0.66, 0.05), [1.0] * 4]  # B-splines with no data in their support
+    from osmobulge.imaging._kernels import _band_cholesky_solve, _lsq_normal
+
+    ata, aty = np.zeros((len(t) - 4, 4)), np.zeros((len(t) - 4, 1))
+    _lsq_normal(x, y[:, None], t, np.ones(len(x)), ata, aty)
+    assert not _band_cholesky_solve(ata, aty)  # singular: the fallback is taken
+    want = make_lsq_spline(x, y, t, k=3)
+    np.testing.assert_allclose(lsq_spline(x, y, t)(x), want(x), rtol=0, atol=1e-12)
