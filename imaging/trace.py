@@ -2,9 +2,12 @@ r"""Trace the membrane dome of one chamber through a micrograph series, frame by
 
 For every frame (:class:`ChamberTracer`):
 
-1. **drift**: phase correlation (:func:`skimage.registration.phase_cross_correlation`)
-   of a patch of the base under the membrane (walls and well bottom; it
-   excludes the dome) against the first frame predicts where the chamber is;
+1. **drift**: while tracking (the last frame was good) the chamber is looked
+   for where the last frame put it; otherwise, and whenever the tracked
+   geometry is implausible, phase correlation
+   (:func:`skimage.registration.phase_cross_correlation`) of a patch of the
+   base under the membrane (walls and well bottom; it excludes the dome)
+   against the first frame predicts where the chamber is;
 2. **flat membrane line and tilt**: sub-pixel centres of the membrane band
    where it lies flat on the base's top surface, away from every well, with a
    clipped least-squares line (its angle is the tilt);
@@ -13,15 +16,21 @@ For every frame (:class:`ChamberTracer`):
    tops, the axis halfway between them;
 4. **dome**: a guide curve (the previous frame's dome, a manual prior, or a
    minimum-cost path from rim to rim on a coarse background-flattened image)
-   is refined twice: grey levels are sampled along the guide's normals
-   (:func:`scipy.ndimage.map_coordinates`), a smooth path through the band is
-   chosen by dynamic programming (robust to dust and gaps), and the band's
-   two edges are located at the half-levels of each side (sub-pixel, either
-   contrast sign, any band width); a smoothing spline with clipped outliers
-   gives the profile;
+   is refined: grey levels are sampled bilinearly along the guide's normals,
+   the band is found near the guide -- within the last frame-to-frame motion
+   when tracking, else along a smooth path through a wide window chosen by
+   dynamic programming (robust to dust and gaps) -- and its two edges are
+   located at the half-levels of each side (sub-pixel, either contrast sign,
+   any band width); narrow passes repeat until the curve stops moving, and a
+   smoothing spline with clipped outliers gives the profile.  A tracked result
+   that is not trustworthy (weak or incomplete band, large residuals, no
+   convergence) is redone with the wide search, then from the global guide
+   (``FrameTrace.mode`` says which gave the result);
 5. **measures and flags**: volume and area of both halves as solids of
    revolution (:mod:`osmobulge.imaging.geometry`), and the quality figures.
 
+The inner loops (sampling, band edges, the dynamic-programming path, the
+least-squares splines) are compiled (:mod:`osmobulge.imaging._kernels`).
 Everything is in pixels of the bulge-up view (see :mod:`osmobulge.imaging._chamber`);
 :func:`osmobulge.imaging.extract` converts to SI.
 """
@@ -555,12 +564,20 @@ class ChamberTracer:
         return out
 
     def _trustworthy(self, tr):
-        """A tracked (not global) result good enough to keep: strong band along the whole dome."""
+        """A tracked (not global) result good enough to keep: strong band along the whole dome.
+
+        Strong: median band contrast above half the flat band's or, tracking from
+        the last frame, above 0.8x the last dome's (a thinning membrane fades
+        slowly; a lost track drops at once).
+        """
         dome = ~tr["excluded"]
         if not dome.any():
             return False
-        con = tr["contrast"][dome]
-        return bool(np.mean(tr["good"][dome]) > 0.9 and _nanmedian(con) > 0.5 * tr["ref_contrast"]
+        con = _nanmedian(tr["contrast"][dome])
+        strong = con > 0.5 * tr["ref_contrast"]
+        if tr.get("mode") == "track" and self.prev is not None:
+            strong = strong or con > 0.8 * self.prev.figures.get("dome_contrast", np.inf) * tr["ref_contrast"]
+        return bool(np.mean(tr["good"][dome]) > 0.9 and strong
                     and tr["residual_rms"] < self.settings.residual_flag and tr["converged"]
                     and tr["edge_fraction"] < 0.05)
 
@@ -913,8 +930,9 @@ class ChamberTracer:
             out.message = "chamber walls not found"
             out.flag, out.flag_figure, out.flag_value = "no_membrane", "wall_rms", np.nan
             return out
-        # the measured axis is the best drift estimate for the next frame's prediction
+        # the measured axis is the best drift estimate (reported, and the next frame's prediction)
         self._drift = np.array([g.line.x0 - self.ref.line.x0, g.line.y0 - self.ref.line.y0])
+        out.drift = (float(self._drift[0]), float(self._drift[1]))
         out.geometry = g
         if manual is not None:
             return self._from_points(view, g, out, manual)

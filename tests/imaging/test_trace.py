@@ -184,3 +184,49 @@ def test_step_crossing_and_viterbi():
     sc[80:84, 3] = 1.0  # a speck far off the line
     path = viterbi_path(np.clip(sc, -0.5, 1.0), max_step=2, penalty=0.3)
     assert np.mean(np.abs(path - true) <= 1) > 0.95
+
+
+def test_tracking_pass_agrees_with_the_wide_search():
+    """Frames tracked from the last one give the wide (DP) search's answer, and the truth."""
+    vt = list(np.linspace(0.0, 3.0, 9))
+    s = render_series(vt, lambda_pre=lam, nuisances=Nuisances(noise_sigma=0.02, drift_sigma=3.0), seed=11, **SMALL)
+    tracer, traces = trace_series(s.frames)
+    modes = [r.mode for r in traces]
+    assert modes[0] == "global" and modes[-6:] == ["track"] * 6, modes
+    e = errors(s, tracer, traces)
+    assert e[:, 0].max() < 0.5 and e[:, 1].max() < 0.02
+    # the same frames through the wide search from the same guide
+    for i in range(4, len(vt)):
+        t_track = traces[i]
+        tracer.prev = traces[i - 1]
+        view = FrameView(s.frames[i], tracer.k)
+        wide = tracer.trace_dome(view, t_track.geometry, np.c_[traces[i - 1].u, traces[i - 1].z], track=False)
+        assert wide["mode"] in ("guide", "global")  # the wide search (global when it judges the thin pole faint)
+        tree = cKDTree(np.c_[wide["u"], wide["z"]])
+        d, _ = tree.query(np.c_[t_track.u, t_track.z])
+        assert np.sqrt(np.mean(d**2)) < 0.1
+
+
+def test_untrustworthy_tracking_escalates():
+    """A jump the narrow tracking window cannot follow (Vtilde 0.3 -> 3) is found by the wide search or globally."""
+    s = render_series([0.0, 0.3, 3.0], lambda_pre=lam, nuisances=Nuisances(noise_sigma=0.01), seed=12, **SMALL)
+    tracer, traces = trace_series(s.frames)
+    assert traces[2].mode in ("guide", "global")
+    assert [r.flag for r in traces] == ["ok"] * 3
+    e = errors(s, tracer, traces)
+    assert e[:, 0].max() < 0.5 and e[:, 1].max() < 0.02
+
+
+def test_tracked_geometry_survives_a_large_drift():
+    """A stage jump beyond the tracked wall search falls back to phase correlation: the rim is still right."""
+    s = render_series([0.0, 0.5, 0.6, 0.7], lambda_pre=lam, seed=13, **SMALL)
+    frames = s.frames.copy()
+    frames[2] = np.roll(frames[2], (14, -33), axis=(0, 1))  # 33 px sideways between frames 1 and 2
+    frames[3] = np.roll(frames[3], (14, -33), axis=(0, 1))
+    tracer, traces = trace_series(frames)
+    assert [r.flag for r in traces] == ["ok"] * 4
+    for i in (2, 3):
+        r = traces[i]
+        assert r.drift[0] == pytest.approx(traces[1].drift[0] - 33.0, abs=1.0)
+        assert r.geometry.rim_radius == pytest.approx(float(s.truth.rim_radius[i]) / 1e-6, abs=0.5)
+        assert r.volume == pytest.approx(float(s.truth.volume[i]) / 1e-18, rel=0.02)
