@@ -296,3 +296,70 @@ def lsq_spline(x, y, t, w=None):
     if not _band_cholesky_solve(ata, aty) or not np.all(np.isfinite(aty)):
         return make_lsq_spline(x, y_in, t, k=3, w=w)
     return BSpline(t, aty.reshape((n, *y_in.shape[1:])), 3)
+
+
+@njit(cache=True, nogil=True)
+def _fill_and_smooth(prof, sigma):
+    """nan -> median of the finite samples, then a Gaussian along axis 0 (scipy's kernel, mode "nearest")."""
+    n, m = prof.shape
+    n_bad = 0
+    for i in range(n):
+        for j in range(m):
+            if not np.isfinite(prof[i, j]):
+                n_bad += 1
+    if n_bad:
+        good = np.empty(n * m - n_bad)
+        c = 0
+        for i in range(n):
+            for j in range(m):
+                if np.isfinite(prof[i, j]):
+                    good[c] = prof[i, j]
+                    c += 1
+        fill = np.median(good) if c else np.nan
+        for i in range(n):
+            for j in range(m):
+                if not np.isfinite(prof[i, j]):
+                    prof[i, j] = fill
+    if not sigma > 0:
+        return prof
+    radius = int(4.0 * sigma + 0.5)
+    wts = np.empty(2 * radius + 1)
+    tot = 0.0
+    for r in range(-radius, radius + 1):
+        wts[r + radius] = np.exp(-0.5 * r * r / (sigma * sigma))
+        tot += wts[r + radius]
+    wts /= tot
+    out = np.zeros_like(prof)
+    for i in range(n):
+        for r in range(-radius, radius + 1):
+            src = min(max(i + r, 0), n - 1)
+            wr = wts[r + radius]
+            for j in range(m):
+                out[i, j] += wr * prof[src, j]
+    return out
+
+
+def smoothed_transects(frame, k, points, directions, offsets, sigma):
+    """:func:`sample_transects`, nan filled with the median of the rest, smoothed along the stations.
+
+    ``ndi.gaussian_filter1d(where(isfinite(p), p, nanmedian(p)), sigma, axis=0, mode="nearest")``.
+    """
+    return _fill_and_smooth(sample_transects(frame, k, points, directions, offsets), float(sigma))
+
+
+@njit(cache=True, nogil=True)
+def ends_noise(prof):
+    """Noise of one sample from the differences at both ends of each profile (4 samples each, as in trace)."""
+    n, m = prof.shape
+    e = min(4, m)
+    d = np.empty(n * (2 * e - 1))
+    c = 0
+    row = np.empty(2 * e)
+    for i in range(n):
+        for j in range(e):
+            row[j] = prof[i, j]
+            row[e + j] = prof[i, m - e + j]
+        for j in range(2 * e - 1):
+            d[c] = abs(row[j + 1] - row[j])
+            c += 1
+    return 1.4826 * np.median(d) / np.sqrt(2.0)

@@ -256,7 +256,7 @@ class ProfileSpline:
     spline: interpolate.BSpline
     length: float
     residuals: np.ndarray
-    _u_of_s: interpolate.PchipInterpolator = field(repr=False)
+    _u_of_s: object = field(repr=False)  # arc length -> spline parameter (callable)
 
     def __call__(self, s) -> np.ndarray:
         """Points ``(x, y)`` at arc length(s) ``s`` from the first end, shape (..., 2)."""
@@ -281,6 +281,23 @@ class ProfileSpline:
     def rms(self) -> float:
         """RMS distance of the input points from the spline."""
         return float(np.sqrt(np.mean(self.residuals**2))) if self.residuals.size else np.nan
+
+
+def sorted_quantile(x, q):
+    """``np.quantile(x, q)`` (linear method) of an increasing array, by interpolation (no sort)."""
+    x = np.asarray(x, float)
+    return np.interp(np.asarray(q, float) * (len(x) - 1), np.arange(len(x)), x)
+
+
+@dataclass(frozen=True)
+class _Inverse:
+    """Spline parameter at arc length: linear interpolation of the dense arc-length table (monotone)."""
+
+    s: np.ndarray
+    u: np.ndarray
+
+    def __call__(self, s):
+        return np.interp(s, self.s, self.u)
 
 
 def _arc_length_table(spl, n=4001):
@@ -352,14 +369,14 @@ def smooth_profile(points, *, sigma=None, smoothing=None, weights=None, knot_spa
             raise ValueError(f"knot_spacing must be > 0, got {knot_spacing!r}")
         n_int = int(np.clip(np.floor(chord[-1] / float(knot_spacing)), 0, max(len(pts_ok) - 4, 0)))
         # interior knots at quantiles of the data: every knot span holds points (Schoenberg-Whitney)
-        inner = np.quantile(u[1:-1], np.linspace(0.0, 1.0, n_int + 2)[1:-1]) if n_int else np.zeros(0)
+        inner = sorted_quantile(u[1:-1], np.linspace(0.0, 1.0, n_int + 2)[1:-1]) if n_int else np.zeros(0)
         t = np.r_[[0.0] * 4, inner, [1.0] * 4]
         lsq = lsq_spline(u, pts_ok, t, ww)
         spl = interpolate.BSpline(lsq.t, lsq.c.T, 3, axis=1)
     else:
         spl, u = interpolate.make_splprep(pts_ok.T, u=u, s=float(smoothing), w=ww, k=3)
     uu, ss = _arc_length_table(spl)
-    u_of_s = interpolate.PchipInterpolator(ss, uu)
+    u_of_s = _Inverse(ss, uu)
     fitted = np.asarray(spl(u)).T
     res = np.full(len(pts), np.nan)
     idx = np.flatnonzero(ok)[keep]

@@ -56,9 +56,9 @@ from osmobulge.imaging._chamber import (
     measure_line,
     measure_walls,
 )
-from osmobulge.imaging._kernels import lsq_spline
+from osmobulge.imaging._kernels import ends_noise, lsq_spline, smoothed_transects
 from osmobulge.imaging._normals import polyline_normals, resample_polyline, viterbi_path
-from osmobulge.imaging.geometry import revolution_measures, smooth_profile
+from osmobulge.imaging.geometry import revolution_measures, smooth_profile, sorted_quantile
 
 __all__ = ["TraceSettings", "FrameTrace", "ChamberTracer", "FLAGS", "trace_series"]
 
@@ -76,9 +76,11 @@ class TraceSettings:
         Half-width of the wide (dynamic-programming) band search along the
         guide's normals (plus half the band thickness).
     track_search : float
-        Smallest half-width of the fast tracking pass from the previous frame's
-        dome (no dynamic programming; widened to 1.5x the last frame-to-frame
-        motion, at most ``search``).  An unreliable tracked result falls back to
+        Smallest half-width of the tracking pass from the dome predicted by the
+        last two frames (no dynamic programming; widened to 1.5x the last
+        prediction error plus 2 px).  Beyond twice this the frame is traced
+        with the wide search instead; a tracking pass that finds the band where
+        predicted (within 1 px) is final.  An unreliable tracked result falls back to
         the wide search, then to the global guide.
     refine : float
         Half-width of the final sub-pixel pass.
@@ -112,7 +114,7 @@ class TraceSettings:
     """
 
     search: float = 20.0
-    track_search: float = 8.0
+    track_search: float = 5.0
     refine: float = 5.0
     station_step: float = 1.0
     sample_step: float = 0.5
@@ -250,6 +252,7 @@ class ChamberTracer:
         self.blur = self._estimate_blur(view)
         self._drift = np.zeros(2)  # (dx, dy) of the current frame w.r.t. the first, view px
         self.prev = None  # last good FrameTrace
+        self._prev2 = None  # the good one before it (for the motion prediction)
         self._motion = self.settings.search  # px, last frame-to-frame motion of the dome
         self._tracking = False  # the last frame processed was good: start from its geometry
         self.priors = {}  # frame index -> (u, z) guide in chamber px
@@ -364,13 +367,16 @@ class ChamberTracer:
         """Drift, flat line, walls and rim of the chamber in one frame (a :class:`ChamberGeometry`).
 
         While tracking (the last frame was good) the chamber is looked for where
-        the last frame put it (the wide line and wall searches absorb a drift of
-        up to ``max_drift``); the phase correlation of the base runs first
+        the last frame put it: first with the fine line fit alone (a vertical
+        drift of a few px), then with the wide line search before it (up to
+        ``max_drift``; the walls always get their wide search); the phase correlation of the base runs first
         otherwise, and again when the tracked geometry is implausible (walls
         lost, or the rim radius jumped).
         """
         if self._tracking and self.prev is not None and self.prev.geometry is not None:
-            geom, drift = self._geometry_at(view, self._drift.copy())
+            geom, drift = self._geometry_at(view, self._drift.copy(), coarse=False)
+            if geom is None:  # moved beyond the fine windows: the wide searches from the same place
+                geom, drift = self._geometry_at(view, self._drift.copy())
             gp = self.prev.geometry
             if geom is not None and abs(geom.rim_radius - gp.rim_radius) <= 2.0 + 0.02 * gp.rim_radius:
                 return geom, drift
@@ -379,25 +385,35 @@ class ChamberTracer:
             drift = self._drift.copy()
         return self._geometry_at(view, drift)
 
-    def _geometry_at(self, view, drift):
+    def _geometry_at(self, view, drift, *, coarse=True):
+        """Geometry near the predicted position; ``coarse=False``: no wide line search (None when it was needed)."""
         g0 = self.ref
         line = replace(g0.line, x0=g0.line.x0 + drift[0], y0=g0.line.y0 + drift[1])
         well = g0.well
         if self.prev is not None and self.prev.geometry is not None:
             line = replace(line, angle=self.prev.geometry.line.angle)
             well = replace(self.prev.geometry.well, depth=g0.well.depth)
-        line = self._coarse_line(view, line)
+        if coarse:
+            line = self._coarse_line(view, line)
         win = 0.5 * g0.thickness + 8.0
         us = self._flat_u
         if self.prev is not None and len(self.prev.u):
             # skip columns where the last dome (its overhang) comes down into the search window
             low = self.prev.z < 0.5 * g0.thickness + win + 6.0
             if low.any():
-                du = np.abs(us[:, None] - self.prev.u[low][None, :]).min(axis=1)
+                lu = np.sort(self.prev.u[low])
+                j = np.searchsorted(lu, us)
+                du = np.minimum(np.abs(us - lu[np.clip(j - 1, 0, len(lu) - 1)]), np.abs(us - lu[np.clip(j, 0, len(lu) - 1)]))
                 if (du > 6.0).sum() >= 12:
                     us = us[du > 6.0]
+        predicted = line
         line, thick, con, rms, inl = measure_line(view, line, us, polarity=g0.polarity,
                                                   thickness=g0.thickness, window=win)
+        if not coarse:
+            # the fine window holds the band only when it moved less than a few px: else its contrast drops
+            dz = abs(float(np.dot(line.point(0.0) - predicted.point(0.0), line.normal)))
+            if not (dz < 6.0 and abs(con) > 0.5 * abs(g0.contrast)):
+                return None, drift
         well = self._coarse_walls(view, line, well)
         well, wall_rms = measure_walls(view, line, well, thickness=g0.thickness, window=8.0)
         if well is None:
@@ -478,10 +494,7 @@ class ChamberTracer:
         # normals point to the left of travel; travel is left rim -> right rim, so "left" is outward (up)
         w = half + 0.5 * g.thickness
         offs = np.arange(-w, w + 1e-9, sstep)
-        prof = view.transects(pts, nrm, offs)
-        if not np.all(np.isfinite(prof)):
-            prof = np.where(np.isfinite(prof), prof, _nanmedian(prof))
-        prof = ndi.gaussian_filter1d(prof, 1.0 / step, axis=0, mode="nearest")
+        prof = smoothed_transects(view.frame, view.k, pts, nrm, offs, 1.0 / step)  # nan-filled, smoothed along
         if dp:
             q = g.polarity * (np.median(prof, axis=1, keepdims=True) - prof)
             dec = max(1, int(round(3.0 / step)))
@@ -507,8 +520,7 @@ class ChamberTracer:
         mid, lo, hi, con, width = band_edges(prof, offs, g.polarity, centre=centre, search=search,
                                              side=max(2, int(1.5 / sstep)))
         # noise of a single sample, from differences at the window ends (away from the band)
-        ends = np.c_[prof[:, :4], prof[:, -4:]]
-        noise = 1.4826 * float(np.median(np.abs(np.diff(ends, axis=1)))) / np.sqrt(2.0)
+        noise = float(ends_noise(prof))
         return {"mid": mid, "lo": lo, "hi": hi, "contrast": con, "width": width, "stations": s, "noise": noise,
                 "station_pts": pts, "normals": nrm, "half": w}
 
@@ -527,10 +539,12 @@ class ChamberTracer:
         """
         st = self.settings
         R = g.rim_radius
+        # tracking only while the prediction is good: a wider window needs the robust wide search
+        half_track = max(st.track_search, 1.5 * self._motion + 2.0)
         if guide is None:
             attempts = ["global"]
         else:
-            attempts = (["track"] if track else []) + ["guide", "global"]
+            attempts = (["track"] if track and half_track <= 2.0 * st.track_search else []) + ["guide", "global"]
         out = None
         for mode in attempts:
             if mode == "global":
@@ -540,8 +554,7 @@ class ChamberTracer:
                 gu, half = res
             else:
                 gu = guide
-                half = st.search if mode == "guide" else float(np.clip(1.5 * self._motion + 2.0, st.track_search,
-                                                                        st.search))
+                half = st.search if mode == "guide" else half_track
             gu = np.asarray(gu, float)
             # guide from rim to rim through the current rim points
             keep = ~self._exclusion(g, gu[:, 0], gu[:, 1])
@@ -562,6 +575,24 @@ class ChamberTracer:
             if out is not None and (mode == "global" or self._trustworthy(out)):
                 break
         return out
+
+    def _predicted_guide(self, index):
+        """The dome expected in frame ``index``: the last one moved as it moved since the one before.
+
+        Points at equal fractions of the arc length correspond; without a good
+        frame just before the last, the last dome itself.
+        """
+        p, q = self.prev, self._prev2
+        cur = np.c_[p.u, p.z]
+        if q is None or q.index != p.index - 1 or p.index != index - 1 or len(q.u) < 4 or p.source != "auto":
+            return cur
+        fp = np.r_[0.0, np.cumsum(np.hypot(np.diff(p.u), np.diff(p.z)))]
+        fq = np.r_[0.0, np.cumsum(np.hypot(np.diff(q.u), np.diff(q.z)))]
+        if not (fp[-1] > 0 and fq[-1] > 0):
+            return cur
+        x = fp / fp[-1]
+        old = np.c_[np.interp(x, fq / fq[-1], q.u), np.interp(x, fq / fq[-1], q.z)]
+        return 2.0 * cur - old
 
     def _trustworthy(self, tr):
         """A tracked (not global) result good enough to keep: strong band along the whole dome.
@@ -638,7 +669,7 @@ class ChamberTracer:
         sel = w > 0
         chord = float(np.sum(np.hypot(*np.diff(pts[sel], axis=0).T)))
         n_int = int(np.clip(np.floor(chord / spacing), 0, max(int(sel.sum()) - 4, 0)))
-        inner = np.quantile(u[sel][1:-1], np.linspace(0.0, 1.0, n_int + 2)[1:-1]) if n_int else np.zeros(0)
+        inner = sorted_quantile(u[sel][1:-1], np.linspace(0.0, 1.0, n_int + 2)[1:-1]) if n_int else np.zeros(0)
         t = np.r_[[u[0]] * 4, inner, [u[-1]] * 4]
         return lsq_spline(u, pts, t, w)
 
@@ -701,21 +732,25 @@ class ChamberTracer:
         ref_con = abs(g.contrast) if np.isfinite(g.contrast) else None
         # pass 1: wide search with dynamic programming and a robust stiff spline for the next guide, or
         # (tracking from the last frame) a narrow search and the stations moved by their smoothed offsets
-        r = self._refine(view, g, guide_uz, half, dp=not track, coarse=track)
+        r = self._refine(view, g, guide_uz, half, dp=not track)
         if ref_con is None:
             ref_con = float(np.nanpercentile(r["contrast"], 90))
         r = self._clean(g, r, ref_con)
         use = r["use"]
         if use.sum() < 6:
             return None
-        motion = float(np.percentile(np.abs(r["mid"][use]), 90))
+        motion = moved = float(np.percentile(np.abs(r["mid"][use]), 90))
         ks = float(np.clip(4.0 + 10.0 * r["sigma"], 4.0, 15.0))
-        uz = self._offset_guide(g, r) if track else self._guide_from(g, r, ks)
-        # pass 2: narrow search around the previous curve, repeated until it stops moving
-        wd = np.where(use, r["width"], np.nan)
-        ok_w = np.isfinite(wd)
-        wmed = ndi.median_filter(np.interp(np.arange(len(wd)), np.flatnonzero(ok_w), wd[ok_w]), 31, mode="nearest")
-        for _ in range(3):
+        # a fine tracking pass that found the band where predicted is final; else narrow passes around
+        # the last curve, repeated until it stops moving
+        n_more = 0 if (track and motion < 1.0) else 3
+        if n_more:
+            uz = self._offset_guide(g, r) if track else self._guide_from(g, r, ks)
+            wd = np.where(use, r["width"], np.nan)
+            ok_w = np.isfinite(wd)
+            wmed = ndi.median_filter(np.interp(np.arange(len(wd)), np.flatnonzero(ok_w), wd[ok_w]), 31,
+                                     mode="nearest")
+        for _ in range(n_more):
             sw = resample_polyline(g.line.point(uz[:, 0], uz[:, 1]), st.station_step)[1]
             width = (np.linspace(0.0, sw[-1], len(wmed)), wmed)
             r = self._refine(view, g, uz, st.refine, dp=False, width=width)
@@ -942,9 +977,17 @@ class ChamberTracer:
             gx, gy = view.from_frame(np.asarray(guide)[:, 1], np.asarray(guide)[:, 0])
             guide_uz = np.c_[g.line.coords(np.c_[gx, gy])]
         elif self.prev is not None and self.prev.flag == "ok" and len(self.prev.u):
-            guide_uz = np.c_[self.prev.u, self.prev.z]
+            guide_uz = self._predicted_guide(index)
             track = True
         tr = self.trace_dome(view, g, guide_uz, track=track)
+        if tr is not None:
+            self._finish(view, g, out, tr)
+            if tr["mode"] == "track" and out.flag != "ok":
+                # a tracked frame failing a check is traced again as without tracking (an event, a lost track)
+                out = FrameTrace(index=index, geometry=g, drift=out.drift)
+                tr = self.trace_dome(view, g, guide_uz, track=False)
+                if tr is not None:
+                    self._finish(view, g, out, tr)
         if tr is None:
             out.message = "no dome traced"
             out.figures = {"dome_contrast": 0.0, "well_membrane": self._well_membrane(view, g)}
@@ -954,6 +997,15 @@ class ChamberTracer:
             else:
                 out.flag, out.flag_figure, out.flag_value = "no_membrane", "dome_contrast", 0.0
             return out
+        if out.flag == "ok":
+            self._prev2, self.prev = self.prev, out
+            # the first pass's offsets from the predicted dome are the prediction error (global: try tracking)
+            self._motion = tr["motion"] if tr["mode"] != "global" else 0.0
+            self._tracking = True
+        return out
+
+    def _finish(self, view, g, out, tr):
+        """Measures, quality figures and flag of a traced dome, into ``out``."""
         out.u, out.z = tr["u"], tr["z"]
         out.points_u, out.points_z = tr["points_u"], tr["points_z"]
         out.residual_rms = tr["residual_rms"]
@@ -964,11 +1016,6 @@ class ChamberTracer:
         out.flag, out.flag_figure, out.flag_value = self._flag(out.figures)
         out.ok = True
         out.mode = tr["mode"]
-        if out.flag == "ok":
-            self.prev = out
-            self._motion = tr["motion"] if tr["mode"] == "track" else self.settings.search
-            self._tracking = True
-        return out
 
     def _measure(self, out):
         try:
@@ -1001,7 +1048,7 @@ class ChamberTracer:
         out.figures.update({"residual_rms": 0.0})
         out.flag, out.flag_figure, out.flag_value = "ok", "", np.nan
         out.ok = True
-        self.prev = out  # a person's profile guides the trace of the next frames
+        self._prev2, self.prev = None, out  # a person's profile guides the trace of the next frames
         self._tracking = True
         return out
 

@@ -208,3 +208,21 @@ def test_lsq_spline_falls_back_on_an_empty_knot_span():
     assert not _band_cholesky_solve(ata, aty)  # singular: the fallback is taken
     want = make_lsq_spline(x, y, t, k=3)
     np.testing.assert_allclose(lsq_spline(x, y, t)(x), want(x), rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize("sigma", [0.5, 1.0, 2.3])
+def test_smoothed_transects_and_noise_equal_scipy(sigma):
+    from osmobulge.imaging._kernels import ends_noise, smoothed_transects
+
+    rng = np.random.default_rng(3)
+    frame = (rng.random((60, 70)) * 1000).astype(np.uint16)
+    pts = np.c_[rng.uniform(-5, 75, 50), rng.uniform(5, 55, 50)]  # some transects leave the frame: nan filled
+    d = np.c_[np.zeros(50), np.ones(50)]
+    offs = np.linspace(-4, 4, 17)
+    raw = sample_transects(frame, 0, pts, d, offs)
+    assert np.isnan(raw).any()
+    want = ndi.gaussian_filter1d(np.where(np.isfinite(raw), raw, np.nanmedian(raw)), sigma, axis=0, mode="nearest")
+    got = smoothed_transects(frame, 0, pts, d, offs, sigma)
+    np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-9)
+    ends = np.c_[got[:, :4], got[:, -4:]]
+    assert ends_noise(got) == pytest.approx(1.4826 * np.median(np.abs(np.diff(ends, axis=1))) / np.sqrt(2), rel=1e-12)

@@ -188,15 +188,15 @@ def test_step_crossing_and_viterbi():
 
 def test_tracking_pass_agrees_with_the_wide_search():
     """Frames tracked from the last one give the wide (DP) search's answer, and the truth."""
-    vt = list(np.linspace(0.0, 3.0, 9))
+    vt = list(np.linspace(0.0, 3.0, 25))  # a series as filmed: the dome moves a few px between frames
     s = render_series(vt, lambda_pre=lam, nuisances=Nuisances(noise_sigma=0.02, drift_sigma=3.0), seed=11, **SMALL)
     tracer, traces = trace_series(s.frames)
     modes = [r.mode for r in traces]
-    assert modes[0] == "global" and modes[-6:] == ["track"] * 6, modes
+    assert modes[0] == "global" and modes.count("track") >= 20, modes
     e = errors(s, tracer, traces)
     assert e[:, 0].max() < 0.5 and e[:, 1].max() < 0.02
     # the same frames through the wide search from the same guide
-    for i in range(4, len(vt)):
+    for i in [j for j in range(4, len(vt)) if modes[j] == "track"][::3]:
         t_track = traces[i]
         tracer.prev = traces[i - 1]
         view = FrameView(s.frames[i], tracer.k)
