@@ -21,7 +21,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy import ndimage as ndi
 
-from osmobulge.imaging._kernels import band_edges_rows, sample_transects
+from osmobulge.imaging._kernels import band_edges_rows, fill_rows_nanmedian, robust_line, sample_transects, step_crossing_rows
 
 __all__ = ["FrameView", "Line", "Well", "ChamberGeometry", "ROTATIONS", "detect_orientation", "find_chambers",
            "measure_line", "measure_walls", "band_edges", "step_crossing"]
@@ -176,10 +176,6 @@ def _nanmedian(a, **kw):
         return np.nanmedian(a, **kw)
 
 
-def _take(a, idx):
-    return np.take_along_axis(a, np.clip(idx, 0, a.shape[1] - 1)[:, None], axis=1)[:, 0]
-
-
 def band_edges(profiles, offsets, polarity, *, centre=None, search=None, side=4):
     """Sub-pixel edges, midline and contrast of the membrane band in each profile.
 
@@ -214,8 +210,7 @@ def band_edges(profiles, offsets, polarity, *, centre=None, search=None, side=4)
     q = polarity * -np.asarray(profiles, float)
     n, k = q.shape
     if not np.all(np.isfinite(q)):
-        fill = _nanmedian(q, axis=1, keepdims=True) if n else 0.0
-        q = np.where(np.isfinite(q), q, np.nan_to_num(fill, nan=0.0))
+        q = fill_rows_nanmedian(np.array(q, np.float64))  # each row's median of its finite samples (0 if none)
     if centre is None:
         c, s = np.zeros(n, np.int64), k
     else:
@@ -242,48 +237,15 @@ def step_crossing(profiles, offsets, *, side=4):
     pos, step : ndarray of shape (N,)
         Edge offset (nan if no crossing) and signed step (last level - first level).
     """
-    q = np.asarray(profiles, float)
-    n, k = q.shape
-    a = np.median(q[:, :side], axis=1)
-    b = np.median(q[:, -side:], axis=1)
-    lev = 0.5 * (a + b)
-    s = q > lev[:, None]
-    ch = s[:, :-1] != s[:, 1:]
-    j = np.arange(k - 1)[None, :]
-    dist = np.where(ch, np.abs(j + 0.5 - (k - 1) / 2.0), np.inf)
-    jj = np.argmin(dist, axis=1)
-    ok = np.isfinite(dist[np.arange(n), jj])
-    q0, q1 = _take(q, jj), _take(q, jj + 1)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        t = np.clip((lev - q0) / (q1 - q0), 0.0, 1.0)
-    pos = offsets[jj] + t * (offsets[np.minimum(jj + 1, k - 1)] - offsets[jj])
-    pos[~ok] = np.nan
-    return pos, b - a
+    pos, step = step_crossing_rows(np.asarray(profiles, float), offsets, side)
+    return pos, step
 
 
 def _robust_line(x, y, *, iters=4, clip=3.0, floor=0.1):
     """Least-squares line y = a + b x with sigma clipping (at least ``floor``); returns a, b, rms, inliers."""
-    ok = np.isfinite(x) & np.isfinite(y)
-    a = b = np.nan
-    rms = np.nan
-    for _ in range(iters):
-        if ok.sum() < 2:
-            break
-        xo, yo = x[ok], y[ok]
-        xm, ym = xo.mean(), yo.mean()
-        sxx = float(np.dot(xo - xm, xo - xm))
-        if not sxx > 0:
-            break
-        b = float(np.dot(xo - xm, yo - ym)) / sxx  # least squares, as np.polyfit(x, y, 1)
-        a = ym - b * xm
-        res = y - (a + b * x)
-        mad = 1.4826 * np.median(np.abs(res[ok] - np.median(res[ok])))
-        rms = float(np.sqrt(np.mean(res[ok] ** 2)))
-        new = np.isfinite(res) & (np.abs(res) <= max(clip * mad, floor))
-        if np.array_equal(new, ok) or new.sum() < 2:
-            break
-        ok = new
-    return a, b, rms, ok
+    a, b, rms, ok = robust_line(np.asarray(x, np.float64), np.asarray(y, np.float64), int(iters), float(clip),
+                                float(floor))
+    return (float(a), float(b), float(rms), ok) if np.isfinite(a) else (np.nan, np.nan, float(rms), ok)
 
 
 # ---------------------------------------------------------------------------------- orientation

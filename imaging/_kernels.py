@@ -363,3 +363,142 @@ def ends_noise(prof):
             d[c] = abs(row[j + 1] - row[j])
             c += 1
     return 1.4826 * np.median(d) / np.sqrt(2.0)
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _step_crossing_rows(q, offsets, side, out):
+    n, k = q.shape
+    buf = np.empty(max(side, 1))
+    for i in range(n):
+        row = q[i]
+        fin_a = True
+        fin_b = True
+        for j in range(side):
+            fin_a &= np.isfinite(row[j])
+            fin_b &= np.isfinite(row[k - side + j])
+        a = _median_small(row, 0, side, buf) if fin_a else np.nan
+        b = _median_small(row, k - side, k, buf) if fin_b else np.nan
+        lev = 0.5 * (a + b)
+        best = np.inf
+        jj = 0
+        for j in range(k - 1):
+            if (row[j] > lev) != (row[j + 1] > lev):
+                d = abs(j + 0.5 - (k - 1) / 2.0)
+                if d < best:
+                    best = d
+                    jj = j
+        out[1, i] = b - a
+        if best == np.inf:
+            out[0, i] = np.nan
+            continue
+        t = _clip01((lev - row[jj]) / (row[jj + 1] - row[jj]))
+        out[0, i] = offsets[jj] + t * (offsets[min(jj + 1, k - 1)] - offsets[jj])
+
+
+def step_crossing_rows(q, offsets, side):
+    """Mid-level step crossing nearest the centre of each row: the loop of :func:`osmobulge.imaging._chamber.step_crossing`.
+
+    Returns
+    -------
+    ndarray of shape (2, N)
+        Crossing offset (nan if none) and step (last level - first level).
+    """
+    q = np.ascontiguousarray(q, np.float64)
+    out = np.empty((2, q.shape[0]))
+    _step_crossing_rows(q, np.ascontiguousarray(offsets, np.float64), int(min(max(side, 1), q.shape[1])), out)
+    return out
+
+
+@njit(cache=True, nogil=True)
+def robust_line(x, y, iters, clip, floor):
+    """Least-squares line ``y = a + b x`` with sigma clipping: the loop of ``_chamber._robust_line``.
+
+    Returns a, b, rms and the inlier mask.
+    """
+    n = x.shape[0]
+    ok = np.empty(n, np.bool_)
+    for i in range(n):
+        ok[i] = np.isfinite(x[i]) and np.isfinite(y[i])
+    a = np.nan
+    b = np.nan
+    rms = np.nan
+    res = np.empty(n)
+    for _ in range(iters):
+        m = 0
+        sx = 0.0
+        sy = 0.0
+        for i in range(n):
+            if ok[i]:
+                m += 1
+                sx += x[i]
+                sy += y[i]
+        if m < 2:
+            break
+        xm = sx / m
+        ym = sy / m
+        sxx = 0.0
+        sxy = 0.0
+        for i in range(n):
+            if ok[i]:
+                sxx += (x[i] - xm) * (x[i] - xm)
+                sxy += (x[i] - xm) * (y[i] - ym)
+        if not sxx > 0:
+            break
+        b = sxy / sxx
+        a = ym - b * xm
+        r_ok = np.empty(m)
+        c = 0
+        ss = 0.0
+        for i in range(n):
+            res[i] = y[i] - (a + b * x[i])
+            if ok[i]:
+                r_ok[c] = res[i]
+                ss += res[i] * res[i]
+                c += 1
+        med = np.median(r_ok)
+        mad = 1.4826 * np.median(np.abs(r_ok - med))
+        rms = np.sqrt(ss / m)
+        lim = max(clip * mad, floor)
+        same = True
+        cnt = 0
+        new = np.empty(n, np.bool_)
+        for i in range(n):
+            new[i] = np.isfinite(res[i]) and abs(res[i]) <= lim
+            cnt += new[i]
+            same &= new[i] == ok[i]
+        if same or cnt < 2:
+            break
+        ok[:] = new
+    return a, b, rms, ok
+
+
+@njit(cache=True, nogil=True)
+def longest_run(mask, weights):
+    """Largest sum of ``weights`` over a run of True in ``mask``."""
+    best = 0.0
+    cur = 0.0
+    for i in range(mask.shape[0]):
+        cur = cur + weights[i] if mask[i] else 0.0
+        if cur > best:
+            best = cur
+    return best
+
+
+@njit(cache=True, nogil=True)
+def fill_rows_nanmedian(q):
+    """Non-finite samples -> the median of the row's finite ones (0 for a row with none), in place."""
+    n, k = q.shape
+    buf = np.empty(k)
+    for i in range(n):
+        c = 0
+        for j in range(k):
+            if np.isfinite(q[i, j]):
+                buf[c] = q[i, j]
+                c += 1
+        if c == k:
+            continue
+        fill = np.median(buf[:c]) if c else 0.0
+        for j in range(k):
+            if not np.isfinite(q[i, j]):
+                q[i, j] = fill
+    return q

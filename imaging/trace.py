@@ -56,7 +56,7 @@ from osmobulge.imaging._chamber import (
     measure_line,
     measure_walls,
 )
-from osmobulge.imaging._kernels import ends_noise, lsq_spline, smoothed_transects
+from osmobulge.imaging._kernels import ends_noise, longest_run, lsq_spline, smoothed_transects
 from osmobulge.imaging._normals import polyline_normals, resample_polyline, viterbi_path
 from osmobulge.imaging.geometry import revolution_measures, smooth_profile, sorted_quantile
 
@@ -116,7 +116,7 @@ class TraceSettings:
     search: float = 20.0
     track_search: float = 5.0
     refine: float = 5.0
-    station_step: float = 1.0
+    station_step: float = 2.0
     sample_step: float = 0.5
     smoothing: float = 0.35
     min_contrast: float = 0.08
@@ -183,15 +183,6 @@ class FrameTrace:
 
 
 # ---------------------------------------------------------------------------------- helpers
-def _longest_run(mask, weights):
-    """Largest sum of ``weights`` over a run of True in ``mask``."""
-    best = cur = 0.0
-    for m, w in zip(mask, weights, strict=True):
-        cur = cur + w if m else 0.0
-        best = max(best, cur)
-    return best
-
-
 def _sustained_min(x, n):
     """Smallest value of a running maximum over ``n`` samples (a gap sustained over n stations)."""
     if len(x) < n:
@@ -656,7 +647,10 @@ class ChamberTracer:
         # angle measured from the outward direction (-u on the left, +u on the right) towards +z
         th = np.arctan2(dz[near], side * du[near])
         if near.sum() >= 4:
-            c1, c0 = np.polyfit(rho[near], np.unwrap(th), 1)
+            x, y = rho[near], np.unwrap(th)
+            dx = x - x.mean()
+            c1 = float(np.dot(dx, y - y.mean()) / max(float(np.dot(dx, dx)), 1e-300))  # least-squares line
+            c0 = float(y.mean()) - c1 * float(x.mean())
         else:
             c0, c1 = float(np.median(th)), 0.0
         rr = np.arange(1.0, rmin, 1.0)
@@ -805,7 +799,7 @@ class ChamberTracer:
             win = min(151, 2 * (cd.size // 2) + 1)
             local = np.maximum(ndi.percentile_filter(cd, 80, size=win, mode="nearest"), 0.5 * float(np.median(cd)))
             low = cd < np.maximum(0.3 * local, 3.0 * tr.get("noise", 0.0))
-            fig["gap_length"] = float(_longest_run(low, ds[dome]) / max(g.thickness, 1.0))
+            fig["gap_length"] = float(longest_run(low, ds[dome]) / max(g.thickness, 1.0))
         else:
             fig["gap_length"] = 0.0
         # rim contact: membrane on the flat line just outside each rim, as a fraction of the

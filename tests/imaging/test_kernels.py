@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from scipy import ndimage as ndi
 
-from osmobulge.imaging._chamber import FrameView, band_edges
+from osmobulge.imaging._chamber import FrameView, _robust_line, band_edges, step_crossing
 from osmobulge.imaging._kernels import sample_transects
 from osmobulge.imaging._normals import viterbi_path
 from osmobulge.imaging.synthetic import render_frame
@@ -82,6 +82,50 @@ def ref_viterbi_path(score, max_step=1, penalty=0.0):
     for i in range(n - 1, 0, -1):
         path[i - 1] = path[i] - back[i, path[i]]
     return path
+
+
+def ref_step_crossing(profiles, offsets, *, side=4):
+    q = np.asarray(profiles, float)
+    n, k = q.shape
+    a = np.median(q[:, :side], axis=1)
+    b = np.median(q[:, -side:], axis=1)
+    lev = 0.5 * (a + b)
+    s = q > lev[:, None]
+    ch = s[:, :-1] != s[:, 1:]
+    j = np.arange(k - 1)[None, :]
+    dist = np.where(ch, np.abs(j + 0.5 - (k - 1) / 2.0), np.inf)
+    jj = np.argmin(dist, axis=1)
+    ok = np.isfinite(dist[np.arange(n), jj])
+    q0, q1 = _take(q, jj), _take(q, jj + 1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        t = np.clip((lev - q0) / (q1 - q0), 0.0, 1.0)
+    pos = offsets[jj] + t * (offsets[np.minimum(jj + 1, k - 1)] - offsets[jj])
+    pos[~ok] = np.nan
+    return pos, b - a
+
+
+def ref_robust_line(x, y, *, iters=4, clip=3.0, floor=0.1):
+    ok = np.isfinite(x) & np.isfinite(y)
+    a = b = np.nan
+    rms = np.nan
+    for _ in range(iters):
+        if ok.sum() < 2:
+            break
+        xo, yo = x[ok], y[ok]
+        xm, ym = xo.mean(), yo.mean()
+        sxx = float(np.dot(xo - xm, xo - xm))
+        if not sxx > 0:
+            break
+        b = float(np.dot(xo - xm, yo - ym)) / sxx  # least squares, as np.polyfit(x, y, 1)
+        a = ym - b * xm
+        res = y - (a + b * x)
+        mad = 1.4826 * np.median(np.abs(res[ok] - np.median(res[ok])))
+        rms = float(np.sqrt(np.mean(res[ok] ** 2)))
+        new = np.isfinite(res) & (np.abs(res) <= max(clip * mad, floor))
+        if np.array_equal(new, ok) or new.sum() < 2:
+            break
+        ok = new
+    return a, b, rms, ok
 
 
 # ------------------------------------------------------------------------ tests
@@ -226,3 +270,46 @@ def test_smoothed_transects_and_noise_equal_scipy(sigma):
     np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-9)
     ends = np.c_[got[:, :4], got[:, -4:]]
     assert ends_noise(got) == pytest.approx(1.4826 * np.median(np.abs(np.diff(ends, axis=1))) / np.sqrt(2), rel=1e-12)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_step_crossing_equals_numpy_reference(seed):
+    rng = np.random.default_rng(seed)
+    offs = np.arange(-8.0, 8.01, 0.5)
+    edge = rng.uniform(-9, 9, 200)
+    prof = 50 + 40 * np.tanh((offs[None, :] - edge[:, None]) / rng.uniform(0.5, 3, (200, 1)))
+    prof += rng.normal(0, 2, prof.shape)
+    prof[::23, 0] = np.nan  # a side level lost: no crossing, nan step
+    prof[7] = 5.0  # flat: no crossing
+    for side in (1, 4, 9):
+        got, want = step_crossing(prof, offs, side=side), ref_step_crossing(prof, offs, side=side)
+        for g, w_ in zip(got, want, strict=True):
+            np.testing.assert_allclose(g, w_, rtol=1e-12, atol=1e-12, equal_nan=True)
+    assert np.isfinite(got[0]).mean() > 0.7
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_robust_line_equals_numpy_reference(seed):
+    rng = np.random.default_rng(seed)
+    x = np.sort(rng.uniform(-100, 100, 150))
+    y = 3.0 + 0.02 * x + rng.normal(0, 0.1, x.size)
+    out = rng.random(x.size) < 0.15
+    y[out] += rng.uniform(2, 8, out.sum())  # outliers
+    y[3] = np.nan
+    for kw in ({}, {"clip": 2.5}, {"floor": 1.5, "iters": 2}):
+        a, b, rms, ok = _robust_line(x, y, **kw)
+        ra, rb, rrms, rok = ref_robust_line(x, y, **kw)
+        assert a == pytest.approx(ra, rel=1e-10, abs=1e-12) and b == pytest.approx(rb, rel=1e-10, abs=1e-14)
+        assert rms == pytest.approx(rrms, rel=1e-10) and np.array_equal(ok, rok)
+    assert not ok[out].any()
+    # degenerate: fewer than two points, or all x equal
+    assert np.isnan(_robust_line(np.array([1.0]), np.array([2.0]))[0])
+    assert np.isnan(_robust_line(np.ones(5), np.arange(5.0))[0])
+
+
+def test_longest_run():
+    from osmobulge.imaging._kernels import longest_run
+
+    m = np.array([1, 1, 0, 1, 1, 1, 0, 1], bool)
+    w = np.array([1.0, 2.0, 9.0, 1.0, 1.0, 0.5, 4.0, 3.0])
+    assert longest_run(m, w) == 3.0 and longest_run(~m, w) == 9.0 and longest_run(m[:0], w[:0]) == 0.0
