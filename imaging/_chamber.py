@@ -17,11 +17,12 @@ from __future__ import annotations
 
 import warnings
 from dataclasses import dataclass, replace
+from functools import cached_property
 
 import numpy as np
 from scipy import ndimage as ndi
 
-from osmobulge.imaging._kernels import band_edges_rows, fill_rows_nanmedian, robust_line, sample_transects, step_crossing_rows
+from osmobulge.imaging._kernels import band_edges_rows, fill_rows_nanmedian, nanmedian, robust_line, sample_transects, step_crossing_rows
 
 __all__ = ["FrameView", "Line", "Well", "ChamberGeometry", "ROTATIONS", "detect_orientation", "find_chambers",
            "measure_line", "measure_walls", "band_edges", "step_crossing"]
@@ -97,21 +98,30 @@ class Line:
     y0: float
     angle: float  # rad, direction (cos, sin) in (x, y)
 
-    @property
+    @cached_property
     def direction(self):
-        return np.array([np.cos(self.angle), np.sin(self.angle)])
+        """Unit vector along the line (read-only, computed once)."""
+        d = np.array([np.cos(self.angle), np.sin(self.angle)])
+        d.flags.writeable = False
+        return d
 
-    @property
+    @cached_property
     def normal(self):
-        """Unit normal pointing up (bulge side, towards row 0 for angle 0)."""
-        return np.array([np.sin(self.angle), -np.cos(self.angle)])
+        """Unit normal pointing up (bulge side, towards row 0 for angle 0; read-only)."""
+        n = np.array([np.sin(self.angle), -np.cos(self.angle)])
+        n.flags.writeable = False
+        return n
 
     def point(self, u, z=0.0):
         """View points at line coordinate ``u`` and height ``z`` (arrays broadcast), shape (..., 2)."""
         u = np.asarray(u, float)
         z = np.asarray(z, float)
-        d, n = self.direction, self.normal
-        return np.stack([self.x0 + u * d[0] + z * n[0], self.y0 + u * d[1] + z * n[1]], axis=-1)
+        (d0, d1), (n0, n1) = self.direction, self.normal
+        x = self.x0 + u * d0 + z * n0
+        out = np.empty((*x.shape, 2))
+        out[..., 0] = x
+        out[..., 1] = self.y0 + u * d1 + z * n1
+        return out
 
     def coords(self, pts):
         """View points (N, 2) -> (u, z)."""
@@ -168,6 +178,8 @@ class ChamberGeometry:
 # ---------------------------------------------------------------------------------- 1-D helpers
 def _nanmedian(a, **kw):
     """``np.nanmedian`` without the all-nan warning (returns nan there); plain median when all finite (fast)."""
+    if not kw:
+        return nanmedian(a)
     a = np.asarray(a)
     if np.isfinite(a).all():
         return np.median(a, **kw)
@@ -374,7 +386,7 @@ def measure_line(view, line, u, *, polarity, thickness, window):
     new = line.shifted(0.0, a)
     # offsets along the normal grow as sin(angle - true angle) * u: subtract the slope
     new = Line(new.x0, new.y0, line.angle - np.arctan(b))
-    return new, float(np.median(width[inl])), float(np.median(con[inl])), rms, inl
+    return new, nanmedian(width[inl]), nanmedian(con[inl]), rms, inl
 
 
 def measure_walls(view, line, well, *, thickness, window, n_rows=None):

@@ -369,7 +369,7 @@ def _store(i, res, tracer, k_rot, view_shape, frame_shape, p, n_profile, scal, f
     # the paper's description: an ellipse through the traced points, integrated the same way
     pts_u = res.points_u if len(res.points_u) >= 5 else res.u
     pts_z = res.points_z if len(res.points_z) >= 5 else res.z
-    sel = np.linspace(0, len(pts_u) - 1, min(len(pts_u), 400)).astype(int)
+    sel = np.linspace(0, len(pts_u) - 1, min(len(pts_u), 200)).astype(int)
     if np.ptp(pts_z) > 1.0:
         ell = fit_ellipse(np.c_[pts_u[sel], pts_z[sel]])
         if ell:
@@ -380,7 +380,7 @@ def _store(i, res, tracer, k_rot, view_shape, frame_shape, p, n_profile, scal, f
 
 def _ellipse_volume(ell):
     """Volume of the solid of revolution of the ellipse arc above z = 0 (nan if it does not cross z = 0)."""
-    t = np.linspace(0.0, 2 * np.pi, 4001)
+    t = np.linspace(0.0, 2 * np.pi, 2001)
     e = ell.points(t)
     above = e[:, 1] >= 0
     if above.all() or not above.any():

@@ -375,7 +375,7 @@ def smooth_profile(points, *, sigma=None, smoothing=None, weights=None, knot_spa
         spl = interpolate.BSpline(lsq.t, lsq.c.T, 3, axis=1)
     else:
         spl, u = interpolate.make_splprep(pts_ok.T, u=u, s=float(smoothing), w=ww, k=3)
-    uu, ss = _arc_length_table(spl)
+    uu, ss = _arc_length_table(spl, n=int(np.clip(8 * (len(spl.t) - 7), 1025, 4001)))  # 8 per knot span
     u_of_s = _Inverse(ss, uu)
     fitted = np.asarray(spl(u)).T
     res = np.full(len(pts), np.nan)

@@ -56,7 +56,7 @@ from osmobulge.imaging._chamber import (
     measure_line,
     measure_walls,
 )
-from osmobulge.imaging._kernels import ends_noise, longest_run, lsq_spline, smoothed_transects
+from osmobulge.imaging._kernels import ends_noise, longest_run, lsq_spline, nanmedian, smoothed_transects
 from osmobulge.imaging._normals import polyline_normals, resample_polyline, viterbi_path
 from osmobulge.imaging.geometry import revolution_measures, smooth_profile, sorted_quantile
 
@@ -619,11 +619,11 @@ class ChamberTracer:
             filled = np.interp(np.arange(len(mid)), np.flatnonzero(use), mid[use])
             med = ndi.median_filter(filled, 15, mode="nearest")
             dev = np.abs(mid - med)
-            mad = 1.4826 * float(np.median(dev[use]))
+            mad = 1.4826 * nanmedian(dev[use])
             use &= dev <= max(4.0 * mad, 1.0)
         d2 = np.diff(np.where(use, mid, np.nan), 2)
         d2 = d2[np.isfinite(d2)]
-        sigma = 1.4826 * float(np.median(np.abs(d2))) / np.sqrt(6.0) if d2.size > 10 else st.smoothing
+        sigma = 1.4826 * nanmedian(np.abs(d2)) / np.sqrt(6.0) if d2.size > 10 else st.smoothing
         r.update(pu=pu, pz=pz, good=good, excluded=excl, use=use, sigma=float(np.clip(sigma, 0.01, 3.0)))
         return r
 
@@ -692,7 +692,7 @@ class ChamberTracer:
                 spl = cls._lsq(u, pts, np.where(keep, wts, 0.0), spacing)
                 res = np.hypot(*(spl(u) - pts).T)
                 sel = keep & inner
-                mad = 1.4826 * float(np.median(res[sel])) if sel.any() else 0.0
+                mad = 1.4826 * nanmedian(res[sel]) if sel.any() else 0.0
                 new = np.isfinite(res) & (res <= max(3.5 * mad, floor))
                 if pinned:
                     new[[0, -1]] = True
@@ -797,7 +797,7 @@ class ChamberTracer:
         cd = np.nan_to_num(con[dome], nan=0.0)
         if cd.size:
             win = min(151, 2 * (cd.size // 2) + 1)
-            local = np.maximum(ndi.percentile_filter(cd, 80, size=win, mode="nearest"), 0.5 * float(np.median(cd)))
+            local = np.maximum(ndi.percentile_filter(cd, 80, size=win, mode="nearest"), 0.5 * nanmedian(cd))
             low = cd < np.maximum(0.3 * local, 3.0 * tr.get("noise", 0.0))
             fig["gap_length"] = float(longest_run(low, ds[dome]) / max(g.thickness, 1.0))
         else:
@@ -807,17 +807,22 @@ class ChamberTracer:
         uu = R + np.linspace(0.02, 0.1, 9) * R
         zw = 0.5 * g.thickness + 3.0 * self.blur + 4.0
         vals = []
+        fars = []
         for sgn in (-1.0, 1.0):
-            p = g.line.point(sgn * uu, 0.0)
-            band = _nanmedian(view.sample(p[:, 0], p[:, 1]))
             side = self._flat_u[np.sign(self._flat_u) == sgn]
             if side.size < 5:  # no flat surface on this side in the field: use the other side's
                 side = self._flat_u
-            far = side[np.argsort(np.abs(side))[:15]]
-            pf = g.line.point(far, 0.0)
-            pw = g.line.point(far, zw)
-            band_far = _nanmedian(view.sample(pf[:, 0], pf[:, 1]))
-            water = _nanmedian(view.sample(pw[:, 0], pw[:, 1]))
+            fars.append(side[np.argsort(np.abs(side))[:15]])
+        # one sampling call: rim band (9 per side), far band and water above it (15 per side)
+        pts = np.concatenate([g.line.point(-uu, 0.0), g.line.point(uu, 0.0)]
+                             + [g.line.point(f, z) for f in fars for z in (0.0, zw)])
+        v = view.sample(pts[:, 0], pts[:, 1])
+        n0, n1, n2 = len(uu), len(fars[0]), len(fars[1])
+        bands = (v[:n0], v[n0:2 * n0])
+        o = 2 * n0
+        fars_v = ((v[o:o + n1], v[o + n1:o + 2 * n1]), (v[o + 2 * n1:o + 2 * n1 + n2], v[o + 2 * n1 + n2:]))
+        for band_v, (far_v, water_v) in zip(bands, fars_v, strict=True):
+            band, band_far, water = _nanmedian(band_v), _nanmedian(far_v), _nanmedian(water_v)
             den = water - band_far
             vals.append(float((water - band) / den) if np.isfinite(den) and abs(den) > 0 else np.nan)
         fig["rim_contact"] = float(min(vals))

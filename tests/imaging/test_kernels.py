@@ -313,3 +313,16 @@ def test_longest_run():
     m = np.array([1, 1, 0, 1, 1, 1, 0, 1], bool)
     w = np.array([1.0, 2.0, 9.0, 1.0, 1.0, 0.5, 4.0, 3.0])
     assert longest_run(m, w) == 3.0 and longest_run(~m, w) == 9.0 and longest_run(m[:0], w[:0]) == 0.0
+
+
+def test_nanmedian_equals_numpy():
+    from osmobulge.imaging._kernels import nanmedian
+
+    rng = np.random.default_rng(0)
+    for n in (1, 2, 7, 100):
+        a = rng.normal(size=(n, 3))
+        a[rng.random(a.shape) < 0.2] = np.nan
+        want = np.nanmedian(a) if np.isfinite(a).any() else np.nan
+        assert nanmedian(a) == pytest.approx(want, nan_ok=True, rel=1e-15)
+    assert np.isnan(nanmedian(np.full(4, np.nan))) and np.isnan(nanmedian(np.zeros(0)))
+    assert nanmedian(np.array([3, 1, 2], np.uint16)) == 2.0
