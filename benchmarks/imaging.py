@@ -14,12 +14,19 @@ Run with ``python benchmarks/imaging.py [--quick] [--frames 500]``.
    those must be flagged, their figures are not counted).  One more row
    renders delaminated, fractured (gap and collapsed) and touching frames and
    counts the flags that match.
-2. **Speed**: a multi-page 16-bit 1024 x 1024 TIFF read frame by frame with
-   :func:`osmobulge.imaging.io.open_series` (median of 3 passes) versus
-   :func:`osmobulge.imaging.extract` on the same file, single core.
-   Target: extraction no slower than 5x reading.
+2. **Speed**: a multi-page 16-bit 1024 x 1024 TIFF of a series that grows as
+   filmed (Vtilde 0 -> 5 over the ``--speed-frames`` frames, slow start, 1 %
+   noise, 1 px drift per frame) read frame by frame with
+   :func:`osmobulge.imaging.io.open_series` (page cache warm; median of 3
+   passes) versus :func:`osmobulge.imaging.extract` on the same file (median
+   of 3), single core.  The first call in a process, which loads the numba
+   kernels from their disk cache (about 6 s to compile them once on a new
+   machine), is timed apart, and so is how each frame was traced (``track``:
+   from the prediction of the last two frames; ``guide``: wide search;
+   ``global``: from scratch).  Target: extraction no slower than 5x reading.
 3. **Memory**: peak traced heap (tracemalloc, numpy buffers included) of
-   ``extract`` on a 100- and a 500-frame TIFF.  Target: flat in the number of frames.
+   ``extract`` on a 100- and a 500-frame TIFF cycling through 40 frames of that
+   series.  Target: flat in the number of frames.
 
 BLAS/OpenMP are pinned to one thread and the process to one CPU where allowed.
 """

@@ -22,7 +22,14 @@ from functools import cached_property
 import numpy as np
 from scipy import ndimage as ndi
 
-from osmobulge.imaging._kernels import band_edges_rows, fill_rows_nanmedian, nanmedian, robust_line, sample_transects, step_crossing_rows
+from osmobulge.imaging._kernels import (
+    band_edges_rows,
+    fill_rows_nanmedian,
+    nanmedian,
+    robust_line,
+    sample_transects,
+    step_crossing_rows,
+)
 
 __all__ = ["FrameView", "Line", "Well", "ChamberGeometry", "ROTATIONS", "detect_orientation", "find_chambers",
            "measure_line", "measure_walls", "band_edges", "step_crossing"]

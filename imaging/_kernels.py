@@ -396,7 +396,7 @@ def _step_crossing_rows(q, offsets, side, out):
 
 
 def step_crossing_rows(q, offsets, side):
-    """Mid-level step crossing nearest the centre of each row: the loop of :func:`osmobulge.imaging._chamber.step_crossing`.
+    """Mid-level step crossing nearest the centre of each row (the loop of ``_chamber.step_crossing``).
 
     Returns
     -------

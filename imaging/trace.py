@@ -48,8 +48,8 @@ from skimage.registration import phase_cross_correlation
 from osmobulge.imaging._chamber import (
     ROTATIONS,
     ChamberGeometry,
-    _nanmedian,
     FrameView,
+    _nanmedian,
     band_edges,
     detect_orientation,
     find_chambers,
@@ -394,7 +394,8 @@ class ChamberTracer:
             if low.any():
                 lu = np.sort(self.prev.u[low])
                 j = np.searchsorted(lu, us)
-                du = np.minimum(np.abs(us - lu[np.clip(j - 1, 0, len(lu) - 1)]), np.abs(us - lu[np.clip(j, 0, len(lu) - 1)]))
+                nl = len(lu) - 1
+                du = np.minimum(np.abs(us - lu[np.clip(j - 1, 0, nl)]), np.abs(us - lu[np.clip(j, 0, nl)]))
                 if (du > 6.0).sum() >= 12:
                     us = us[du > 6.0]
         predicted = line
