@@ -21,6 +21,7 @@ from functools import cached_property
 
 import numpy as np
 from scipy import ndimage as ndi
+from scipy.stats import siegelslopes
 
 from osmobulge.imaging._kernels import (
     band_edges_rows,
@@ -401,7 +402,10 @@ def measure_walls(view, line, well, *, thickness, window, n_rows=None):
 
     The walls are measured on rows (one per pixel by default) between 12 % and
     80 % of the well depth below the base's top surface (``z = -thickness / 2``),
-    fitted with clipped least squares (dust on a wall only removes rows), and
+    fitted with clipped least squares (dust on a wall only removes rows: so do
+    rows whose step is weaker than half the median or of the other sign), once
+    more centred on the first fit when that was poor (RMS > 0.5 px), starting
+    from a repeated-median line (:func:`scipy.stats.siegelslopes`), and
     extrapolated to that surface: the wall tops are the rim.
     """
     top = -0.5 * thickness
@@ -411,15 +415,31 @@ def measure_walls(view, line, well, *, thickness, window, n_rows=None):
     zs = top - np.linspace(0.12, 0.8, n_rows) * depth
     out = {}
     rms_all = []
+    offs = np.arange(-window, window + 1e-9, 0.5)
+    d = np.broadcast_to(line.direction, (len(zs), 2))
     for name, u0, slope in (("left", well.u_left, well.slope_left), ("right", well.u_right, well.slope_right)):
-        uc = u0 + slope * (zs - top)
-        offs = np.arange(-window, window + 1e-9, 0.5)
-        prof = view.transects(line.point(uc, zs), np.broadcast_to(line.direction, (len(zs), 2)), offs)
-        pos, step = step_crossing(prof, offs)
-        ucross = uc + pos
-        a, b, rms, ok = _robust_line(zs - top, ucross, clip=2.5)
-        if not np.isfinite(a) or ok.sum() < 3:
-            return None, np.nan
+        for attempt in range(2):
+            uc = u0 + slope * (zs - top)
+            pos, step = step_crossing(view.transects(line.point(uc, zs), d, offs), offs)
+            # rows whose step is not the wall's (dust on the wall, a speck in a side window) are not used
+            med = _nanmedian(step)
+            pos = np.where((np.sign(step) == np.sign(med)) & (np.abs(step) > 0.5 * abs(med)), pos, np.nan)
+            zz, uu = zs - top, uc + pos
+            if attempt:
+                # a poor first fit (dust over part of the wall): start from the repeated-median line
+                # (50 % breakdown), keep the rows near it, then the clipped least squares
+                fin = np.isfinite(uu)
+                if fin.sum() >= 3:
+                    b0, a0 = siegelslopes(uu[fin], zz[fin])
+                    res = uu - (a0 + b0 * zz)
+                    mad = 1.4826 * _nanmedian(np.abs(res))
+                    uu = np.where(np.abs(res) <= max(3.0 * mad, 0.5), uu, np.nan)
+            a, b, rms, ok = _robust_line(zz, uu, clip=2.5)
+            if not np.isfinite(a) or ok.sum() < 3:
+                return None, np.nan
+            if rms <= 0.5 or attempt:
+                break
+            u0, slope = a, b  # a poor fit from a rough start: once more, centred on it, robustly
         out[name] = (a, b)
         rms_all.append(rms)
     return replace(well, u_left=float(out["left"][0]), slope_left=float(out["left"][1]),

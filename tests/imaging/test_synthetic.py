@@ -138,6 +138,39 @@ def test_clean_render_band_centre_is_true_midline(vtilde, tilt):
     assert np.abs(err).max() < 0.01  # measured: rms 3e-4..5e-4 px, max <= 2e-3 px
 
 
+@pytest.mark.parametrize("blur", [1.0, 1.5, 2.5])
+def test_flat_band_on_the_base_matches_the_blurred_box_model(blur):
+    """Across the band lying on the base (water above, base below) the image is the blurred box model.
+
+    Regression: compositing the membrane "over" a pixel already mixed from base and water
+    counted water under the band's lower edge and put that edge 0.24 px too high (1 px blur),
+    so every volume read 0.12 px x pi a^2 low.  Model: levels water / band / base with edges
+    at z = +-l0/2, mixed by area in each pixel, then the renderer's Gaussian PSF.
+    """
+    from osmobulge.imaging._chamber import band_edges
+
+    s = render_series([0.0], nuisances=Nuisances(blur_sigma=blur), **SMALL)
+    at = s.truth.attrs
+    frame = s.frames[0].astype(float) / FULL
+    l0 = at["membrane_thickness"] / at["pixel_size"]
+    x = np.arange(frame.shape[0]) - at["anchor_row"]  # px below the true flat midline
+    bg, lb, lm = at["scene_background_level"], at["scene_base_level"], at["scene_membrane_level"]
+
+    def cover(lo, hi):  # area of each pixel [x - 1/2, x + 1/2] inside [lo, hi]
+        return np.clip(np.minimum(x + 0.5, hi) - np.maximum(x - 0.5, lo), 0.0, 1.0)
+
+    sharp = bg + (lm - bg) * cover(-0.5 * l0, 0.5 * l0) + (lb - bg) * cover(0.5 * l0, np.inf)
+    model = ndimage.gaussian_filter1d(sharp, blur, mode="nearest", truncate=4.0)  # the renderer's PSF
+    near = np.abs(x) < l0 + 5 * blur
+    for col in (15, 40, frame.shape[1] - 40, frame.shape[1] - 15):  # the surface, far from the well
+        np.testing.assert_allclose(frame[near, col], model[near], atol=1e-4)  # 16-bit steps: 1.5e-5
+    if blur <= 1.0:  # the band reaches its level: half-level edges are exact, midline at z = 0
+        prof = frame[:, [15, 40]].T
+        mid, lo, hi, con, width = band_edges(prof[:, near], x[near].astype(float), +1)
+        np.testing.assert_allclose(mid, 0.0, atol=0.01)
+        np.testing.assert_allclose(width, l0, atol=0.02)
+
+
 # --------------------------------------------------------------------------------------
 # nuisances, each measured in the image
 # --------------------------------------------------------------------------------------
