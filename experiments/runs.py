@@ -932,10 +932,9 @@ def process_experiment(exp: Experiment, results: Path, *, progress: Callable | N
     """
     import dask
     import numpy as np
-    import xarray as xr
 
     from osmobulge.experiments.curation import load_curation
-    from osmobulge.imaging.extract import extract
+    from osmobulge.imaging.extract import extract, stack_chambers
 
     cur = load_curation(exp.path)
     im = exp.imaging
@@ -998,15 +997,8 @@ def process_experiment(exp: Experiment, results: Path, *, progress: Callable | N
                             region_cols=list(region["cols"]))
         parts.append(ds)
     if regions:
-        per = {}
-        for key in ("prestretch_c1", "prestretch_c2", "prestretch_frames", "reference_radius",
-                    "polarity", "blur_sigma_px", "bulge_direction"):
-            per[key] = [d.attrs.get(key, np.nan) for d in parts]
-        ds = xr.concat(parts, dim="chamber", combine_attrs="override", coords="minimal", compat="override")
-        ds = ds.assign_coords(chamber=("chamber", [r["name"] for r in regions], {"long_name": "chamber region"}))
-        for key, vals in per.items():
-            ds[key] = ("chamber", np.asarray(vals), {"long_name": f"{key} of each chamber region"})
-            ds.attrs.pop(key, None)
+        ds = stack_chambers(parts, [r["name"] for r in regions])
+        ds["chamber"].attrs["long_name"] = "chamber region"
         for key in ("region_name", "region_rows", "region_cols"):
             ds.attrs.pop(key, None)
         ds["region_rows"] = (("chamber", "bound"), np.array([r["rows"] for r in regions]), {"units": "px"})

@@ -31,7 +31,7 @@ from osmobulge.imaging._chamber import FrameView
 from osmobulge.imaging.geometry import fit_ellipse, revolution_measures
 from osmobulge.imaging.trace import FLAGS, ChamberTracer, TraceSettings
 
-__all__ = ["extract", "save_extraction", "load_extraction", "ERRORS", "FLAGS"]
+__all__ = ["extract", "stack_chambers", "save_extraction", "load_extraction", "ERRORS", "FLAGS"]
 
 ERRORS = ("flag", "raise")
 _DIRECTIONS = ("auto", "up", "down", "left", "right")
@@ -174,9 +174,13 @@ def extract(
         Time between frames when the source has no timestamps.
     bulge_direction : {"auto", "up", "down", "left", "right"}
         Direction the dome grows in the image.
-    chamber_region : int or tuple of float, optional
+    chamber_region : int, tuple of float or "all", optional
         Which well when several are in the field: index from the left in the
-        bulge-up view, or ``(col0, col1)`` view columns holding its axis.
+        bulge-up view, or ``(col0, col1)`` view columns holding its axis;
+        default the most central well.  ``"all"``: every well whose two walls
+        are in the field, traced side by side (each frame read once) and
+        stacked along a ``chamber`` dimension (:func:`stack_chambers`); picked
+        points go to the chamber whose axis is nearest.
     errors : {"flag", "raise"}
         A frame that cannot be measured is flagged ``no_membrane`` and kept
         ("flag"), or raises ("raise").
@@ -203,7 +207,8 @@ def extract(
     Returns
     -------
     xarray.Dataset
-        Over ``time`` (s; coordinate ``frame``) and ``s`` (arc length along the
+        Over ``time`` (s; coordinate ``frame``), ``chamber`` (with
+        ``chamber_region="all"``) and ``s`` (arc length along the
         profile, rim to rim, normalised to 1): ``profile_x``, ``profile_z`` (m,
         signed radial position and height above the flat membrane),
         ``profile_col``/``profile_row`` (px in the stored frame),
@@ -250,41 +255,23 @@ def extract(
         if bad:
             raise ValueError(f"{name} has frame indices {bad} outside 0..{n - 1}")
 
-    # -- the tracer ------------------------------------------------------------------------
+    # -- the tracers: one per chamber ------------------------------------------------------------
     first = src[0]
-    tracer = ChamberTracer(first, bulge_direction=bulge_direction, chamber_region=chamber_region,
-                           thickness=None, settings=settings)
-    k_rot = tracer.k
-    view_shape = FrameView(first, k_rot).shape
+    tracers = _tracers(first, bulge_direction, chamber_region, settings)
+    k_rot = tracers[0].k
+    view = FrameView(first, k_rot)
+    if len(tracers) == 1:
+        parts_p, parts_m = [priors_px], [manual_px]
+    else:  # picked points belong to the chamber whose axis is nearest their mean column
+        axes = np.array([t.ref.line.x0 for t in tracers])
 
-    # -- per-frame storage (memory flat in T: scalars and fixed-length profiles only) ----------
-    scal = {k: np.full(n, np.nan) for k in (
-        "bulge_height", "volume_left", "volume_right", "area_left", "area_right", "rim_radius", "residual_rms",
-        "volume_disagreement", "dome_contrast", "gap_length", "rim_contact", "neighbour_gap", "tilt", "drift_x",
-        "drift_y", "axis_col", "axis_row", "volume_ellipse", "ellipse_a", "ellipse_b", "ellipse_rms",
-        "flag_value", "well_depth", "band_thickness", "wall_rms", "line_rms")}
-    flag = np.array(["no_membrane"] * n, dtype=object)
-    flag_figure = np.array([""] * n, dtype=object)
-    source_kind = np.array(["auto"] * n, dtype=object)
-    message = np.array([""] * n, dtype=object)
-    px = np.full((n, n_profile), np.nan)
-    pz = np.full((n, n_profile), np.nan)
-    pcol = np.full((n, n_profile), np.nan)
-    prow = np.full((n, n_profile), np.nan)
-    plen = np.full(n, np.nan)
+        def owner(pts):
+            return int(np.argmin(np.abs(axes - float(np.mean(view.from_frame(pts[:, 1], pts[:, 0])[0])))))
 
-    prior_frames = np.array(sorted(priors_px), int)
+        parts_p = [{i: v for i, v in priors_px.items() if owner(v) == c} for c in range(len(tracers))]
+        parts_m = [{i: v for i, v in manual_px.items() if owner(v) == c} for c in range(len(tracers))]
+    runs = [_Run(t, n, n_profile, pp, mm) for t, pp, mm in zip(tracers, parts_p, parts_m, strict=True)]
 
-    def guide_for(i):
-        if i in priors_px:
-            return priors_px[i]
-        if tracer.prev is not None and tracer.prev.flag == "ok":
-            return None  # tracking from the previous frame
-        if prior_frames.size:
-            return priors_px[int(prior_frames[np.argmin(np.abs(prior_frames - i))])]
-        return None
-
-    iterator = range(n)
     bar = None
     if progress:
         from rich.progress import Progress
@@ -293,33 +280,117 @@ def extract(
         task = bar.add_task("extracting", total=n)
         bar.start()
     try:
-        for i in iterator:
+        for i in range(n):
             try:
                 frame = first if i == 0 else src[i]
-                man = manual_px.get(i)
-                res = tracer.process(frame, i, guide=None if man is not None else guide_for(i), manual=man)
-                if res.geometry is None and errors == "raise":
-                    raise RuntimeError(f"frame {i} cannot be measured: {res.message}")
-            except Exception as err:  # noqa: BLE001 - batch runs record failures as data
+            except Exception as err:  # noqa: BLE001 - an unreadable frame is flagged in every chamber
                 if errors == "raise":
                     raise
-                message[i] = f"{type(err).__name__}: {err}"
-                flag[i] = "no_membrane"
-                flag_figure[i] = "exception"
-                if bar is not None:
-                    bar.advance(task)
-                continue
-            _store(i, res, tracer, k_rot, view_shape, frame.shape, p, n_profile, scal, flag, flag_figure,
-                   source_kind, message, px, pz, pcol, prow, plen)
+                for run in runs:
+                    run.failed(i, err)
+            else:
+                for run in runs:
+                    run.step(i, frame, p, errors)
             if bar is not None:
                 bar.advance(task)
     finally:
         if bar is not None:
             bar.stop()
 
-    return _dataset(times, p, chamber_attrs, tracer, scal, flag, flag_figure, source_kind, message, px, pz, pcol,
-                    prow, plen, n_profile, src, settings, bulge_direction, chamber_region, errors, metadata,
-                    fit_prestretch, priors_px, manual_px)
+    parts = [_dataset(times, p, chamber_attrs, r.tracer, r.scal, r.flag, r.flag_figure, r.source_kind, r.message,
+                      r.px, r.pz, r.pcol, r.prow, r.plen, n_profile, src, settings, bulge_direction, chamber_region,
+                      errors, metadata, fit_prestretch, r.priors, r.manual) for r in runs]
+    if chamber_region != "all":
+        return parts[0]
+    return stack_chambers(parts, [f"chamber-{c}" for c in range(len(parts))])
+
+
+def _tracers(first, bulge_direction, chamber_region, settings):
+    """The tracer of the chosen chamber, or (``"all"``) of every chamber whose two walls are in the field."""
+    if chamber_region != "all":
+        return [ChamberTracer(first, bulge_direction=bulge_direction, chamber_region=chamber_region,
+                              thickness=None, settings=settings)]
+    central = ChamberTracer(first, bulge_direction=bulge_direction, settings=settings)
+    g = central.ref
+    w = FrameView(first, central.k).shape[1]
+    found = [(g.line.x0, central)]
+    for wl in g.others:
+        c0, c1 = g.line.x0 + wl.u_left, g.line.x0 + wl.u_right  # view columns of the wall tops (line ~level)
+        if c0 > 1.0 and c1 < w - 2.0:  # complete: both walls inside the field
+            t = ChamberTracer(first, bulge_direction=central.bulge_direction,
+                              chamber_region=(c0 + 0.25 * (c1 - c0), c1 - 0.25 * (c1 - c0)), settings=settings)
+            found.append((t.ref.line.x0, t))
+    return [t for _, t in sorted(found, key=lambda x: x[0])]
+
+
+class _Run:
+    """One chamber's tracer and per-frame storage (memory flat in T: scalars and fixed-length profiles)."""
+
+    def __init__(self, tracer, n, n_profile, priors, manual):
+        self.tracer, self.n_profile, self.priors, self.manual = tracer, n_profile, priors, manual
+        self.view_shape = FrameView(np.empty(tracer.shape, np.uint8), tracer.k).shape
+        self.scal = {k: np.full(n, np.nan) for k in (
+            "bulge_height", "volume_left", "volume_right", "area_left", "area_right", "rim_radius", "residual_rms",
+            "volume_disagreement", "dome_contrast", "gap_length", "rim_contact", "neighbour_gap", "tilt", "drift_x",
+            "drift_y", "axis_col", "axis_row", "volume_ellipse", "ellipse_a", "ellipse_b", "ellipse_rms",
+            "flag_value", "well_depth", "band_thickness", "wall_rms", "line_rms")}
+        self.flag = np.array(["no_membrane"] * n, dtype=object)
+        self.flag_figure = np.array([""] * n, dtype=object)
+        self.source_kind = np.array(["auto"] * n, dtype=object)
+        self.message = np.array([""] * n, dtype=object)
+        self.px, self.pz, self.pcol, self.prow = (np.full((n, n_profile), np.nan) for _ in range(4))
+        self.plen = np.full(n, np.nan)
+        self.prior_frames = np.array(sorted(priors), int)
+
+    def guide_for(self, i):
+        if i in self.priors:
+            return self.priors[i]
+        if self.tracer.prev is not None and self.tracer.prev.flag == "ok":
+            return None  # tracking from the previous frame
+        if self.prior_frames.size:
+            return self.priors[int(self.prior_frames[np.argmin(np.abs(self.prior_frames - i))])]
+        return None
+
+    def failed(self, i, err):
+        self.message[i] = f"{type(err).__name__}: {err}"
+        self.flag[i] = "no_membrane"
+        self.flag_figure[i] = "exception"
+
+    def step(self, i, frame, p, errors):
+        try:
+            man = self.manual.get(i)
+            res = self.tracer.process(frame, i, guide=None if man is not None else self.guide_for(i), manual=man)
+            if res.geometry is None and errors == "raise":
+                raise RuntimeError(f"frame {i} cannot be measured: {res.message}")
+        except Exception as err:  # noqa: BLE001 - batch runs record failures as data
+            if errors == "raise":
+                raise
+            self.failed(i, err)
+            return
+        _store(i, res, self.tracer, self.tracer.k, self.view_shape, frame.shape, p, self.n_profile, self.scal,
+               self.flag, self.flag_figure, self.source_kind, self.message, self.px, self.pz, self.pcol, self.prow,
+               self.plen)
+
+
+#: per-chamber attributes that become variables over ``chamber`` when chambers are stacked
+_PER_CHAMBER = ("prestretch_c1", "prestretch_c2", "prestretch_frames", "reference_radius", "polarity",
+                "blur_sigma_px", "bulge_direction")
+
+
+def stack_chambers(parts, names):
+    """Stack per-chamber extractions along a ``chamber`` dimension (dims ``time, chamber, ...``).
+
+    Attributes that differ between chambers (:data:`_PER_CHAMBER`: pre-stretch
+    fit, reference radius, polarity, blur, bulge direction) become variables
+    over ``chamber``; the others are those of the first part.
+    """
+    per = {key: [d.attrs.get(key, np.nan) for d in parts] for key in _PER_CHAMBER}
+    ds = xr.concat(parts, dim="chamber", combine_attrs="override", coords="minimal", compat="override")
+    ds = ds.assign_coords(chamber=("chamber", list(names), {"long_name": "chamber"}))
+    for key, vals in per.items():
+        ds[key] = ("chamber", np.asarray(vals), {"long_name": f"{key} of each chamber"})
+        ds.attrs.pop(key, None)
+    return ds.transpose("time", "chamber", ...)
 
 
 def _store(i, res, tracer, k_rot, view_shape, frame_shape, p, n_profile, scal, flag, flag_figure, source_kind,

@@ -78,10 +78,12 @@ class TraceSettings:
     track_search : float
         Smallest half-width of the tracking pass from the dome predicted by the
         last two frames (no dynamic programming; widened to 1.5x the last
-        prediction error plus 2 px).  Beyond twice this the frame is traced
-        with the wide search instead; a tracking pass that finds the band where
-        predicted (within 1 px) is final.  An unreliable tracked result falls back to
-        the wide search, then to the global guide.
+        prediction error plus 4 px and two blur sigmas).  Beyond twice this the
+        frame is traced with the wide search instead, and so is a frame whose
+        band comes within 2 px and two blur sigmas of the window's ends; a
+        tracking pass that finds the band where predicted (within 1 px) is final.
+        An unreliable tracked result falls back to the wide search, then to the
+        global guide.
     refine : float
         Half-width of the final sub-pixel pass.
     station_step : float
@@ -532,7 +534,8 @@ class ChamberTracer:
         st = self.settings
         R = g.rim_radius
         # tracking only while the prediction is good: a wider window needs the robust wide search
-        half_track = max(st.track_search, 1.5 * self._motion + 2.0)
+        # (wide enough that the band's far edge stays 2 px + 2 blur sigmas inside the window)
+        half_track = max(st.track_search, 1.5 * self._motion + 4.0 + 2.0 * self.blur)
         if guide is None:
             attempts = ["global"]
         else:
@@ -735,6 +738,10 @@ class ChamberTracer:
         if use.sum() < 6:
             return None
         motion = moved = float(np.percentile(np.abs(r["mid"][use]), 90))
+        if track and motion > half - 2.0 - 2.0 * self.blur:
+            # the band came close to the window's end (the prediction was off): its edges and width are
+            # not to be trusted -- the wide search takes over
+            return None
         ks = float(np.clip(4.0 + 10.0 * r["sigma"], 4.0, 15.0))
         # a fine tracking pass that found the band where predicted is final; else narrow passes around
         # the last curve, repeated until it stops moving
@@ -999,7 +1006,8 @@ class ChamberTracer:
             return out
         if out.flag == "ok":
             self._prev2, self.prev = self.prev, out
-            # the first pass's offsets from the predicted dome are the prediction error (global: try tracking)
+            # the first pass's offsets from the predicted dome are the prediction error (after a global
+            # trace unknown: the next frame tries tracking, its window's edges guard it)
             self._motion = tr["motion"] if tr["mode"] != "global" else 0.0
             self._tracking = True
         return out

