@@ -61,11 +61,15 @@ def extract(
     = "auto",
     chamber_region: Annotated[int | None, typer.Option(help="Which well when several are in view "
                                                             "(index from the left of the bulge-up view).")] = None,
+    all_chambers: Annotated[bool, typer.Option("--all-chambers", help="Trace every well whose two walls are in "
+                                                                       "view, stacked along 'chamber'.")] = False,
     errors: Annotated[str, typer.Option(help="flag: keep unmeasurable frames flagged; raise: stop.")] = "flag",
     progress: Annotated[bool, typer.Option(help="Show a progress bar.")] = True,
     as_json: Annotated[bool, typer.Option("--json", help="Print the summary as JSON.")] = False,
 ):
     """Extract bulge profiles, volumes, areas and rim radii from a micrograph series into a dataset."""
+    import numpy as np
+
     from osmobulge.imaging.extract import extract as _extract
     from osmobulge.imaging.extract import save_extraction
 
@@ -79,6 +83,8 @@ def extract(
         raise typer.BadParameter(f"{errors!r} is not one of {ERRORS}", param_hint="--errors")
     if not source.exists():
         raise typer.BadParameter(f"{str(source)!r} does not exist", param_hint="SOURCE")
+    if all_chambers and chamber_region is not None:
+        raise typer.BadParameter("give --chamber-region or --all-chambers, not both", param_hint="--all-chambers")
     ch = _chamber(chamber, chamber_radius_um, chamber_depth_um, membrane_thickness_um, concentration_molar)
     try:
         ds = _extract(
@@ -87,7 +93,7 @@ def extract(
             frame_interval=None if frame_interval_min is None else frame_interval_min * 60.0,
             chamber=ch,
             bulge_direction=bulge_direction,
-            chamber_region=chamber_region,
+            chamber_region="all" if all_chambers else chamber_region,
             errors=errors,
             progress=progress and not as_json,
         )
@@ -95,22 +101,29 @@ def extract(
         typer.echo(f"error: {err}", err=True)
         raise typer.Exit(2) from None
     save_extraction(ds, out)
-    flags = {str(f): int((ds.flag == f).sum()) for f in sorted(set(ds.flag.values.tolist()))}
+    flags = {str(f): int((ds.flag == f).sum()) for f in sorted(set(ds.flag.values.ravel().tolist()))}
     ok = ds.flag == "ok"
+    def per_chamber(da):  # a number, or one per chamber; NaN -> null
+        vals = np.atleast_1d(np.asarray(da, float))
+        out_ = [None if v != v else float(v) for v in vals]
+        return out_ if "chamber" in ds.dims else out_[0]
+
+    pre = ds if "chamber" in ds.dims else ds.attrs
     summary = {
         "source": str(source),
         "out": str(out),
         "frames": int(ds.sizes["time"]),
+        "chambers": int(ds.sizes.get("chamber", 1)),
         "flags": flags,
         "pixel_size_m": float(ds.attrs["pixel_size"]),
-        "bulge_direction": ds.attrs["bulge_direction"],
-        "volume_max_m3": float(ds.volume.where(ok).max()) if ok.any() else None,
-        "vtilde_max": float(ds.vtilde.where(ok).max()) if ok.any() else None,
-        "rim_radius_first_m": float(ds.rim_radius[0]),
-        "prestretch_c1": float(ds.attrs["prestretch_c1"]),
-        "prestretch_c2": float(ds.attrs["prestretch_c2"]),
+        "bulge_direction": ds.attrs["bulge_direction"] if "bulge_direction" in ds.attrs else
+        sorted(set(ds["bulge_direction"].values.tolist())),
+        "volume_max_m3": per_chamber(ds.volume.where(ok).max("time")),
+        "vtilde_max": per_chamber(ds.vtilde.where(ok).max("time")),
+        "rim_radius_first_m": per_chamber(ds.rim_radius.isel(time=0)),
+        "prestretch_c1": per_chamber(pre["prestretch_c1"]),
+        "prestretch_c2": per_chamber(pre["prestretch_c2"]),
     }
-    summary = {k: (None if isinstance(v, float) and v != v else v) for k, v in summary.items()}  # NaN -> null
     if as_json:
         typer.echo(json.dumps(summary))
         return
@@ -123,5 +136,8 @@ def extract(
     for k, v in summary.items():
         if k in ("source", "out", "frames"):
             continue
-        table.add_row(k, json.dumps(v) if isinstance(v, dict) else (f"{v:.6g}" if isinstance(v, float) else str(v)))
+        text = json.dumps(v) if isinstance(v, dict) else (f"{v:.6g}" if isinstance(v, float) else str(v))
+        if isinstance(v, list):
+            text = ", ".join("-" if x is None else f"{x:.6g}" for x in v)
+        table.add_row(k, text)
     Console().print(table)

@@ -203,7 +203,7 @@ def test_end_to_end_permeability_recovered():
     assert fit.p_at_rest == pytest.approx(DoubleExponential.PDMS(1.0), rel=0.05)
 
 
-def test_all_chambers_in_the_field_are_stacked():
+def test_all_chambers_in_the_field_are_stacked(tmp_path):
     """chamber_region="all": three wells, each traced, stacked along `chamber` left to right, volumes from the truth."""
     vt = [0.0, 0.4, 0.8, 1.2]
     nu = Nuisances(noise_sigma=0.01, neighbours=((-300e-6, 0.5), (300e-6, 1.5)))
@@ -231,3 +231,23 @@ def test_all_chambers_in_the_field_are_stacked():
     man = extract(s.frames, pixel_size=1e-6, frame_interval=600.0, chamber=CH, progress=False, chamber_region="all",
                   manual_profiles={2: np.c_[cols, rows] * 1e-6})
     assert list(man.profile_source.isel(time=2).values) == ["auto", "manual", "auto"]
+    # the command line: --all-chambers, a summary per chamber
+    import json
+
+    from typer.testing import CliRunner
+
+    from osmobulge.experiments.cli import app
+    from osmobulge.imaging.io import write_series
+
+    path = write_series(s.frames, tmp_path / "field", pixel_size=1e-6, timestamps=600.0 * np.arange(len(vt)))
+    out = tmp_path / "field.nc"
+    args = ["extract", str(path), str(out), "--chamber-radius-um", "100", "--chamber-depth-um", "50",
+            "--membrane-thickness-um", "10", "--all-chambers", "--json"]
+    res = CliRunner().invoke(app, args)
+    assert res.exit_code == 0, res.output
+    summary = json.loads(res.output.strip().splitlines()[-1])
+    assert summary["chambers"] == 3 and summary["flags"] == {"ok": 3 * len(vt)}
+    np.testing.assert_allclose(summary["vtilde_max"], 1.2 * np.array([0.5, 1.0, 1.5]), atol=0.03)
+    assert load_extraction(out).sizes["chamber"] == 3
+    both = CliRunner().invoke(app, [*args[:-1], "--chamber-region", "1"])
+    assert both.exit_code != 0 and "not both" in both.output
