@@ -138,6 +138,6 @@ def extract(
             continue
         text = json.dumps(v) if isinstance(v, dict) else (f"{v:.6g}" if isinstance(v, float) else str(v))
         if isinstance(v, list):
-            text = ", ".join("-" if x is None else f"{x:.6g}" for x in v)
+            text = ", ".join("-" if x is None else (f"{x:.6g}" if isinstance(x, float) else str(x)) for x in v)
         table.add_row(k, text)
     Console().print(table)

@@ -405,7 +405,8 @@ def measure_walls(view, line, well, *, thickness, window, n_rows=None):
     fitted with clipped least squares (dust on a wall only removes rows: so do
     rows whose step is weaker than half the median or of the other sign), once
     more centred on the first fit when that was poor (RMS > 0.5 px), starting
-    from a repeated-median line (:func:`scipy.stats.siegelslopes`), and
+    from a repeated-median line (:func:`scipy.stats.siegelslopes`; the better
+    of the two fits is kept), and
     extrapolated to that surface: the wall tops are the rim.
     """
     top = -0.5 * thickness
@@ -418,6 +419,7 @@ def measure_walls(view, line, well, *, thickness, window, n_rows=None):
     offs = np.arange(-window, window + 1e-9, 0.5)
     d = np.broadcast_to(line.direction, (len(zs), 2))
     for name, u0, slope in (("left", well.u_left, well.slope_left), ("right", well.u_right, well.slope_right)):
+        first = (np.nan, np.nan, np.inf)  # (a, b, rms) of the first fit
         for attempt in range(2):
             uc = u0 + slope * (zs - top)
             pos, step = step_crossing(view.transects(line.point(uc, zs), d, offs), offs)
@@ -435,10 +437,16 @@ def measure_walls(view, line, well, *, thickness, window, n_rows=None):
                     mad = 1.4826 * _nanmedian(np.abs(res))
                     uu = np.where(np.abs(res) <= max(3.0 * mad, 0.5), uu, np.nan)
             a, b, rms, ok = _robust_line(zz, uu, clip=2.5)
-            if not np.isfinite(a) or ok.sum() < 3:
-                return None, np.nan
-            if rms <= 0.5 or attempt:
+            good = np.isfinite(a) and ok.sum() >= 3
+            if attempt:  # keep the better of the two fits
+                if not good or not rms < first[2]:
+                    a, b, rms = first
                 break
+            if not good:
+                return None, np.nan
+            if rms <= 0.5:
+                break
+            first = (a, b, rms)
             u0, slope = a, b  # a poor fit from a rough start: once more, centred on it, robustly
         out[name] = (a, b)
         rms_all.append(rms)

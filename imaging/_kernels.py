@@ -58,6 +58,8 @@ def sample_transects(frame, k, points, directions, offsets):
     frame = np.ascontiguousarray(frame)
     if frame.dtype == np.bool_:
         frame = frame.astype(np.uint8)
+    elif not frame.dtype.isnative:  # big-endian files (ImageJ's default TIFF byte order)
+        frame = frame.astype(frame.dtype.newbyteorder("="))
     p = np.ascontiguousarray(points, np.float64).reshape(-1, 2)
     d = np.ascontiguousarray(directions, np.float64).reshape(-1, 2)
     o = np.ascontiguousarray(offsets, np.float64).ravel()

@@ -262,12 +262,18 @@ def extract(
     view = FrameView(first, k_rot)
     if len(tracers) == 1:
         parts_p, parts_m = [priors_px], [manual_px]
-    else:  # picked points belong to the chamber whose axis is nearest their mean column
+    else:  # picked points belong to the chamber over whose well their mean column lies
         axes = np.array([t.ref.line.x0 for t in tracers])
+        reach = np.array([1.5 * t.ref.rim_radius for t in tracers])  # over the well or its overhanging dome
 
         def owner(pts):
-            return int(np.argmin(np.abs(axes - float(np.mean(view.from_frame(pts[:, 1], pts[:, 0])[0])))))
+            d = np.abs(axes - float(np.mean(view.from_frame(pts[:, 1], pts[:, 0])[0])))
+            return int(np.argmin(d)) if d.min() <= reach[np.argmin(d)] else -1
 
+        orphans = sorted(i for d in (priors_px, manual_px) for i, v in d.items() if owner(v) < 0)
+        if orphans:
+            warnings.warn(f"picked points of frames {orphans} lie over no traced chamber: not used", UserWarning,
+                          stacklevel=2)
         parts_p = [{i: v for i, v in priors_px.items() if owner(v) == c} for c in range(len(tracers))]
         parts_m = [{i: v for i, v in manual_px.items() if owner(v) == c} for c in range(len(tracers))]
     runs = [_Run(t, n, n_profile, pp, mm) for t, pp, mm in zip(tracers, parts_p, parts_m, strict=True)]
@@ -314,11 +320,17 @@ def _tracers(first, bulge_direction, chamber_region, settings):
     g = central.ref
     w = FrameView(first, central.k).shape[1]
     found = [(g.line.x0, central)]
+    margin = 12.0  # the wall fits' windows (8 px) and their side samples inside the field
     for wl in g.others:
         c0, c1 = g.line.x0 + wl.u_left, g.line.x0 + wl.u_right  # view columns of the wall tops (line ~level)
-        if c0 > 1.0 and c1 < w - 2.0:  # complete: both walls inside the field
-            t = ChamberTracer(first, bulge_direction=central.bulge_direction,
-                              chamber_region=(c0 + 0.25 * (c1 - c0), c1 - 0.25 * (c1 - c0)), settings=settings)
+        if c0 > margin and c1 < w - 1.0 - margin:  # complete: both walls inside the field
+            try:
+                t = ChamberTracer(first, bulge_direction=central.bulge_direction,
+                                  chamber_region=(c0 + 0.25 * (c1 - c0), c1 - 0.25 * (c1 - c0)), settings=settings)
+            except ValueError as err:  # a well the tracer cannot measure is left out, with a warning
+                warnings.warn(f"chamber at view columns {c0:.0f}-{c1:.0f} left out: {err}", UserWarning,
+                              stacklevel=3)
+                continue
             found.append((t.ref.line.x0, t))
     return [t for _, t in sorted(found, key=lambda x: x[0])]
 

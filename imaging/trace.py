@@ -469,20 +469,17 @@ class ChamberTracer:
         return np.c_[pu, pz], 1.5 * f + 2.0
 
     # ---------------------------------------------------------------------- refinement
-    def _refine(self, view, g, guide_uz, half, *, dp=True, width=None, coarse=False):
+    def _refine(self, view, g, guide_uz, half, *, dp=True, width=None):
         """One pass along the guide's normals: band midline offsets and station data.
 
         ``dp``: wide pass choosing a smooth path through the band by dynamic
         programming; else the peak is looked for within ``half`` of the guide
-        (or, with ``width``, within the band's half-width).  ``coarse``: stations
-        twice as far apart (the wide and the first tracking pass).
+        (or, with ``width``, within the band's half-width).
         """
         st = self.settings
         guide = g.line.point(guide_uz[:, 0], guide_uz[:, 1])
         # the wide dynamic-programming pass samples twice as coarsely as the final ones
         step, sstep = (2.0 * st.station_step, 2.0 * st.sample_step) if dp else (st.station_step, st.sample_step)
-        if coarse:
-            step = 2.0 * st.station_step
         pts, s = resample_polyline(guide, step)
         nrm = polyline_normals(pts, smooth=2.0 / step)
         # normals point to the left of travel; travel is left rim -> right rim, so "left" is outward (up)
@@ -579,7 +576,8 @@ class ChamberTracer:
         """
         p, q = self.prev, self._prev2
         cur = np.c_[p.u, p.z]
-        if q is None or q.index != p.index - 1 or p.index != index - 1 or len(q.u) < 4 or p.source != "auto":
+        if (q is None or q.index != p.index - 1 or p.index != index - 1 or len(q.u) < 4 or p.source != "auto"
+                or q.source != "auto"):
             return cur
         fp = np.r_[0.0, np.cumsum(np.hypot(np.diff(p.u), np.diff(p.z)))]
         fq = np.r_[0.0, np.cumsum(np.hypot(np.diff(q.u), np.diff(q.z)))]

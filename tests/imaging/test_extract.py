@@ -251,3 +251,28 @@ def test_all_chambers_in_the_field_are_stacked(tmp_path):
     assert load_extraction(out).sizes["chamber"] == 3
     both = CliRunner().invoke(app, [*args[:-1], "--chamber-region", "1"])
     assert both.exit_code != 0 and "not both" in both.output
+    table = CliRunner().invoke(app, [*args[:-1], "--no-progress"])  # the rich table, lists per chamber
+    assert table.exit_code == 0, table.output
+    assert "vtilde_max" in table.output and "up" in table.output
+    # a profile picked over no traced chamber (a well cut by the field's edge) is not used, with a warning
+    with pytest.warns(UserWarning, match="over no traced chamber"):
+        edge = extract(s.frames, pixel_size=1e-6, frame_interval=600.0, chamber=CH, progress=False,
+                       chamber_region="all", manual_profiles={1: np.c_[np.full(8, 3.0), np.arange(8.0)] * 1e-6})
+    assert (edge.profile_source == "auto").all()
+
+
+def test_big_endian_series_is_extracted(series, tmp_path):
+    """ImageJ's default TIFF byte order: the same numbers as native frames."""
+    big = extract(series.frames.astype(">u2"), pixel_size=1e-6, frame_interval=600.0, chamber=CH, progress=False)
+    native = extract(series.frames, pixel_size=1e-6, frame_interval=600.0, chamber=CH, progress=False)
+    np.testing.assert_array_equal(big.volume.values, native.volume.values)
+
+
+def test_a_well_at_the_field_edge_is_left_out_not_fatal():
+    """A neighbour whose wall sits a few px from the field's edge cannot be measured: the others still are."""
+    nu = Nuisances(neighbours=((-300e-6, 0.5), (392e-6, 1.0)))
+    s = render_series([0.0, 0.5], nuisances=nu, lambda_pre=lam, seed=4, chamber=CH, shape=(420, 1000),
+                      pixel_size=1e-6)
+    ds = extract(s.frames, pixel_size=1e-6, frame_interval=600.0, chamber=CH, progress=False, chamber_region="all")
+    assert ds.sizes["chamber"] == 2 and (ds.flag == "ok").all()
+    np.testing.assert_allclose(ds.vtilde.isel(time=1).values, [0.25, 0.5], atol=0.02)

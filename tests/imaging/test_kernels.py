@@ -327,3 +327,12 @@ def test_nanmedian_equals_numpy():
         assert nanmedian(a) == pytest.approx(want, nan_ok=True, rel=1e-15)
     assert np.isnan(nanmedian(np.full(4, np.nan))) and np.isnan(nanmedian(np.zeros(0)))
     assert nanmedian(np.array([3, 1, 2], np.uint16)) == 2.0
+
+
+def test_big_endian_frames_are_sampled_like_native_ones():
+    """ImageJ writes big-endian TIFFs: the kernels take them (numba needs native byte order)."""
+    rng = np.random.default_rng(5)
+    frame = (rng.random((30, 40)) * 60000).astype(np.uint16)
+    pts, d, offs = np.array([[10.3, 12.7], [20.0, 5.5]]), np.array([[0.6, 0.8], [1.0, 0.0]]), np.linspace(-3, 3, 7)
+    np.testing.assert_array_equal(sample_transects(frame.astype(">u2"), 1, pts, d, offs),
+                                  sample_transects(frame, 1, pts, d, offs))
