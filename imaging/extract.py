@@ -463,7 +463,7 @@ def _store(i, res, tracer, k_rot, view_shape, frame_shape, p, n_profile, scal, f
 
 def _ellipse_volume(ell):
     """Volume of the solid of revolution of the ellipse arc above z = 0 (nan if it does not cross z = 0)."""
-    t = np.linspace(0.0, 2 * np.pi, 2001)
+    t = np.linspace(0.0, 2 * np.pi, 721)  # polygon error ~ (2 pi / 720)^2 / 12 = 6e-6 of the volume
     e = ell.points(t)
     above = e[:, 1] >= 0
     if above.all() or not above.any():

@@ -110,7 +110,8 @@ def ellipse_distance(points, center, semi_axes, angle, *, max_iter=60):
     point is ``(a^2 x / (s + a^2), b^2 y / (s + b^2))`` with ``s`` the unique root
     of the decreasing convex function
     ``F(s) = (a x / (s + a^2))^2 + (b y / (s + b^2))^2 - 1`` on ``(-b^2, inf)``.
-    Newton's method started left of the root (``s0 = b y - b^2``, where ``F >= 0``)
+    Newton's method started left of the root (``s0 = 0`` for points outside the
+    ellipse, else the larger of ``b y - b^2`` and ``a x - a^2``, where ``F >= 0``)
     and run in ``u = s + b^2`` (no cancellation near ``s = -b^2``)
     converges monotonically, for points inside and outside alike.  This replaces
     :meth:`skimage.measure.EllipseModel.residuals`, which runs an optimiser per
@@ -135,7 +136,10 @@ def ellipse_distance(points, center, semi_axes, angle, *, max_iter=60):
     y = np.maximum(y, 1e-12 * a)  # on the major axis: the limit y -> 0+ is continuous
     # Newton in u = s + b^2 > 0 (full relative precision where the root is close to s = -b^2)
     d2 = a * a - b * b
-    u = b * y
+    # start left of the root, where F >= 0: at s = 0 (u = b^2) for points outside the ellipse, else at the
+    # larger of u = b y and u = a x - (a^2 - b^2) (each term of F alone is >= 1 there); near the root either way
+    outside = (x / a) ** 2 + (y / b) ** 2 >= 1.0
+    u = np.where(outside, b * b, np.maximum(b * y, a * x - d2))
     for _ in range(int(max_iter)):
         ra, rb = a * x / (u + d2), b * y / u
         f = ra * ra + rb * rb - 1.0
