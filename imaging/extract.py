@@ -441,7 +441,7 @@ def _store(i, res, tracer, k_rot, view_shape, frame_shape, p, n_profile, scal, f
         scal["neighbour_gap"][i] *= p
     # the profile on an even arc-length grid
     seg = np.hypot(np.diff(res.u), np.diff(res.z))
-    sc = np.r_[0.0, np.cumsum(seg)]
+    sc = np.concatenate(([0.0], np.cumsum(seg)))
     plen[i] = sc[-1] * p
     si = np.linspace(0.0, sc[-1], n_profile)
     uu, zz = np.interp(si, sc, res.u), np.interp(si, sc, res.z)
@@ -454,7 +454,7 @@ def _store(i, res, tracer, k_rot, view_shape, frame_shape, p, n_profile, scal, f
     pts_z = res.points_z if len(res.points_z) >= 5 else res.z
     sel = np.linspace(0, len(pts_u) - 1, min(len(pts_u), 200)).astype(int)
     if np.ptp(pts_z) > 1.0:
-        ell = fit_ellipse(np.c_[pts_u[sel], pts_z[sel]])
+        ell = fit_ellipse(np.column_stack((pts_u[sel], pts_z[sel])))
         if ell:
             scal["ellipse_a"][i], scal["ellipse_b"][i] = (x * p for x in ell.semi_axes)
             scal["ellipse_rms"][i] = ell.rms * p

@@ -374,7 +374,7 @@ def smooth_profile(points, *, sigma=None, smoothing=None, weights=None, knot_spa
         n_int = int(np.clip(np.floor(chord[-1] / float(knot_spacing)), 0, max(len(pts_ok) - 4, 0)))
         # interior knots at quantiles of the data: every knot span holds points (Schoenberg-Whitney)
         inner = sorted_quantile(u[1:-1], np.linspace(0.0, 1.0, n_int + 2)[1:-1]) if n_int else np.zeros(0)
-        t = np.r_[[0.0] * 4, inner, [1.0] * 4]
+        t = np.concatenate(([0.0] * 4, inner, [1.0] * 4))
         lsq = lsq_spline(u, pts_ok, t, ww)
         spl = interpolate.BSpline(lsq.t, lsq.c.T, 3, axis=1)
     else:

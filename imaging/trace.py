@@ -575,16 +575,16 @@ class ChamberTracer:
         frame just before the last, the last dome itself.
         """
         p, q = self.prev, self._prev2
-        cur = np.c_[p.u, p.z]
+        cur = np.column_stack((p.u, p.z))
         if (q is None or q.index != p.index - 1 or p.index != index - 1 or len(q.u) < 4 or p.source != "auto"
                 or q.source != "auto"):
             return cur
-        fp = np.r_[0.0, np.cumsum(np.hypot(np.diff(p.u), np.diff(p.z)))]
-        fq = np.r_[0.0, np.cumsum(np.hypot(np.diff(q.u), np.diff(q.z)))]
+        fp = np.concatenate(([0.0], np.cumsum(np.hypot(np.diff(p.u), np.diff(p.z)))))
+        fq = np.concatenate(([0.0], np.cumsum(np.hypot(np.diff(q.u), np.diff(q.z)))))
         if not (fp[-1] > 0 and fq[-1] > 0):
             return cur
         x = fp / fp[-1]
-        old = np.c_[np.interp(x, fq / fq[-1], q.u), np.interp(x, fq / fq[-1], q.z)]
+        old = np.column_stack((np.interp(x, fq / fq[-1], q.u), np.interp(x, fq / fq[-1], q.z)))
         return 2.0 * cur - old
 
     def _trustworthy(self, tr):
@@ -657,7 +657,7 @@ class ChamberTracer:
             c0, c1 = float(np.median(th)), 0.0
         rr = np.arange(1.0, rmin, 1.0)
         tt = c0 + c1 * rr
-        return np.c_[side * R + side * rr * np.cos(tt), rr * np.sin(tt)]
+        return np.column_stack((side * R + side * rr * np.cos(tt), rr * np.sin(tt)))
 
     @staticmethod
     def _lsq(u, pts, w, spacing):
@@ -666,7 +666,7 @@ class ChamberTracer:
         chord = float(np.sum(np.hypot(*np.diff(pts[sel], axis=0).T)))
         n_int = int(np.clip(np.floor(chord / spacing), 0, max(int(sel.sum()) - 4, 0)))
         inner = sorted_quantile(u[sel][1:-1], np.linspace(0.0, 1.0, n_int + 2)[1:-1]) if n_int else np.zeros(0)
-        t = np.r_[[u[0]] * 4, inner, [u[-1]] * 4]
+        t = np.concatenate(([u[0]] * 4, inner, [u[-1]] * 4))
         return lsq_spline(u, pts, t, w)
 
     @classmethod
@@ -678,10 +678,10 @@ class ChamberTracer:
         the stiff spline sampled every pixel when ``final`` is False) and the
         mask of kept points.
         """
-        pts = np.c_[U, Z]
+        pts = np.column_stack((U, Z))
         n = len(U)
         seg = np.hypot(*np.diff(pts, axis=0).T)
-        u = np.r_[0.0, np.cumsum(np.maximum(seg, 1e-9))]
+        u = np.concatenate(([0.0], np.cumsum(np.maximum(seg, 1e-9))))
         wts = np.ones(n)
         inner = np.ones(n, bool)
         if pinned:
@@ -708,8 +708,8 @@ class ChamberTracer:
     def _guide_from(self, g, r, ks):
         R = g.rim_radius
         use = r["use"]
-        U = np.r_[-R, r["pu"][use], R]
-        Z = np.r_[0.0, r["pz"][use], 0.0]
+        U = np.concatenate(([-R], r["pu"][use], [R]))
+        Z = np.concatenate(([0.0], r["pz"][use], [0.0]))
         curve, _ = self._robust_fit(U, Z, max(ks, 8.0), final=False)
         return curve
 
@@ -720,7 +720,7 @@ class ChamberTracer:
         mid = np.interp(np.arange(len(use)), np.flatnonzero(use), r["mid"][use])
         mid = ndi.gaussian_filter1d(ndi.median_filter(mid, 9, mode="nearest"), 2.0, mode="nearest")
         pu, pz = g.line.coords(r["station_pts"] + mid[:, None] * r["normals"])
-        return np.c_[pu, pz]
+        return np.column_stack((pu, pz))
 
     def _passes(self, view, g, guide_uz, half, *, track=False):
         st = self.settings
@@ -766,8 +766,8 @@ class ChamberTracer:
         r["motion"] = motion
         pu, pz = r["pu"][use], r["pz"][use]
         bl, br = self._bridge(g, pu, pz, -1.0), self._bridge(g, pu, pz, 1.0)
-        U = np.r_[-R, bl[:, 0], pu, br[::-1, 0], R]
-        Z = np.r_[0.0, bl[:, 1], pz, br[::-1, 1], 0.0]
+        U = np.concatenate(([-R], bl[:, 0], pu, br[::-1, 0], [R]))
+        Z = np.concatenate(([0.0], bl[:, 1], pz, br[::-1, 1], [0.0]))
         ks = float(np.clip(4.0 + 10.0 * r["sigma"], 4.0, 15.0))
         spl, keep = self._robust_fit(U, Z, ks)
         res = spl.residuals
@@ -794,7 +794,7 @@ class ChamberTracer:
         R = g.rim_radius
         fig = {}
         con, excl = tr["contrast"], tr["excluded"]
-        ds = np.r_[0.0, np.diff(tr["stations"])]
+        ds = np.concatenate(([0.0], np.diff(tr["stations"])))
         dome = ~excl
         ref = tr["ref_contrast"]
         fig["dome_contrast"] = float(_nanmedian(con[dome]) / ref) if dome.any() and ref > 0 else 0.0
