@@ -529,7 +529,15 @@ def find_chambers(view, *, thickness=None, min_width=20, chamber=None):
     if hi < 0.02:
         raise ValueError("no wells found: the strip under the membrane has the grey level of the water everywhere")
     liquid = mag < 0.5 * hi
-    runs = [(s, e) for s, e in _well_intervals(liquid, None) if e - s >= min_width]
+    # a speck of dust on the strip splits a well: runs closer than two membrane thicknesses are one well
+    # (the base between two real wells is wider than that)
+    merged = []
+    for s_, e_ in _well_intervals(liquid, None):
+        if merged and s_ - merged[-1][1] < max(2.0 * thickness, 12.0):
+            merged[-1] = (merged[-1][0], e_)
+        else:
+            merged.append((s_, e_))
+    runs = [(s, e) for s, e in merged if e - s >= min_width]
     inside = [(s, e) for s, e in runs if s > 0 and e < len(ucol)]
     if not runs:
         raise ValueError("no wells found under the membrane band")
