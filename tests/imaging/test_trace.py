@@ -262,3 +262,17 @@ def test_dust_on_the_strip_under_the_membrane_does_not_split_the_well():
     g = find_chambers(FrameView(frame.astype(np.uint16), 0))
     assert g.rim_radius == pytest.approx(100.0, abs=0.5)
     assert g.line.x0 == pytest.approx(220.0, abs=0.5)
+
+
+def test_dust_in_the_well_on_its_axis_does_not_cut_the_depth():
+    """A speck in the liquid on the axis (seed 103 of the dust series) once ended the depth search: walls 5 px long."""
+    from osmobulge.imaging._chamber import find_chambers
+
+    s = render_series([0.0], lambda_pre=lam, **SMALL)
+    frame = s.frames[0].astype(float)
+    row = s.truth.attrs["anchor_row"] + 14.0
+    yy, xx = np.mgrid[: frame.shape[0], : frame.shape[1]]
+    frame *= 1.0 - 0.6 * np.exp(-((xx - 220.0) ** 2 + (yy - row) ** 2) / (2 * 5.0**2))
+    g = find_chambers(FrameView(frame.astype(np.uint16), 0))
+    assert g.well.depth == pytest.approx(50.0, abs=0.5)
+    assert g.rim_radius == pytest.approx(100.0, abs=0.3) and abs(g.well.slope_left) < 0.02
