@@ -532,7 +532,8 @@ def find_chambers(view, *, thickness=None, min_width=20, chamber=None):
     # a speck of dust on the strip splits a well: runs closer than two membrane thicknesses are one well
     # (the base between two real wells is wider than that)
     merged = []
-    for s_, e_ in _well_intervals(liquid, None):
+    # (runs too short to be a well -- a speck on the base beside a wall looks like liquid -- are dropped first)
+    for s_, e_ in [(a_, b_) for a_, b_ in _well_intervals(liquid, None) if b_ - a_ >= min_width]:
         if merged and s_ - merged[-1][1] < max(2.0 * thickness, 12.0):
             merged[-1] = (merged[-1][0], e_)
         else:

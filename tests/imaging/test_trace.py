@@ -276,3 +276,17 @@ def test_dust_in_the_well_on_its_axis_does_not_cut_the_depth():
     g = find_chambers(FrameView(frame.astype(np.uint16), 0))
     assert g.well.depth == pytest.approx(50.0, abs=0.5)
     assert g.rim_radius == pytest.approx(100.0, abs=0.3) and abs(g.well.slope_left) < 0.02
+
+
+def test_dust_beside_a_wall_is_not_part_of_the_well():
+    """A speck in the water over the base just beside a wall (seed 107) looked like a short well: merged, the wall lost."""
+    from osmobulge.imaging._chamber import find_chambers
+
+    s = render_series([0.0], lambda_pre=lam, **SMALL)
+    frame = s.frames[0].astype(float)
+    row = s.truth.attrs["anchor_row"] - 18.0  # in the water strip above the band, over the base
+    yy, xx = np.mgrid[: frame.shape[0], : frame.shape[1]]
+    frame *= 1.0 - 0.6 * np.exp(-((xx - 331.0) ** 2 + (yy - row) ** 2) / (2 * 4.0**2))
+    g = find_chambers(FrameView(frame.astype(np.uint16), 0))
+    assert g.rim_radius == pytest.approx(100.0, abs=0.3)
+    assert g.line.x0 == pytest.approx(220.0, abs=0.3)
