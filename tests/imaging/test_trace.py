@@ -279,7 +279,7 @@ def test_dust_in_the_well_on_its_axis_does_not_cut_the_depth():
 
 
 def test_dust_beside_a_wall_is_not_part_of_the_well():
-    """A speck in the water over the base just beside a wall (seed 107) looked like a short well: merged, the wall lost."""
+    """A speck in the water over the base beside a wall (seed 107) looked like a short well: merged, wall lost."""
     from osmobulge.imaging._chamber import find_chambers
 
     s = render_series([0.0], lambda_pre=lam, **SMALL)
