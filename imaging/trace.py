@@ -518,13 +518,15 @@ class ChamberTracer:
     def _exclusion(self, g, u, z):
         """Points too close to the flat band at or beyond the rims, or to a rim point, (merged with it) are not trusted.
 
-        Within a band thickness (+ 3 px) of the rim point the dome's band and the
-        flat band's corner are one blob, also just inside the rim: a station
-        there is pulled off the dome and bends the bridge to the rim.
+        Within half a band thickness, 2 px and two blur sigmas of the rim point
+        the dome's band and the flat band's corner are one blob, also just
+        inside the rim: a station there is pulled off the dome and bends the
+        bridge to the rim.
         """
         R = g.rim_radius
         zc = g.thickness + 3.0
-        return ((np.abs(u) > R - 1.0) & (z < zc)) | (np.hypot(np.abs(u) - R, z) < zc)
+        near = 0.5 * g.thickness + 2.0 + 2.0 * self.blur  # the corner blob: half a band and the blur around the rim
+        return ((np.abs(u) > R - 1.0) & (z < zc)) | (np.hypot(np.abs(u) - R, z) < near)
 
     def trace_dome(self, view, g, guide=None, *, track=False):
         """Trace the dome given the frame geometry; returns a dict of results (chamber px).
