@@ -236,8 +236,7 @@ def band_edges(profiles, offsets, polarity, *, centre=None, search=None, side=4)
     else:
         c = np.asarray(centre, np.int64)
         s = k if search is None else np.asarray(search, np.int64)
-    mid, lo, hi, con, width = band_edges_rows(q, offsets, c, s, side)
-    return mid, lo, hi, con, width
+    return tuple(band_edges_rows(q, offsets, c, s, side))
 
 
 def step_crossing(profiles, offsets, *, side=4):
@@ -257,8 +256,7 @@ def step_crossing(profiles, offsets, *, side=4):
     pos, step : ndarray of shape (N,)
         Edge offset (nan if no crossing) and signed step (last level - first level).
     """
-    pos, step = step_crossing_rows(np.asarray(profiles, float), offsets, side)
-    return pos, step
+    return tuple(step_crossing_rows(np.asarray(profiles, float), offsets, side))
 
 
 def _robust_line(x, y, *, iters=4, clip=3.0, floor=0.1):
@@ -394,7 +392,7 @@ def measure_line(view, line, u, *, polarity, thickness, window):
     new = line.shifted(0.0, a)
     # offsets along the normal grow as sin(angle - true angle) * u: subtract the slope
     new = Line(new.x0, new.y0, line.angle - np.arctan(b))
-    return new, nanmedian(width[inl]), nanmedian(con[inl]), rms, inl
+    return new, _nanmedian(width[inl]), _nanmedian(con[inl]), rms, inl
 
 
 def measure_walls(view, line, well, *, thickness, window, n_rows=None):
@@ -406,8 +404,8 @@ def measure_walls(view, line, well, *, thickness, window, n_rows=None):
     rows whose step is weaker than half the median or of the other sign), once
     more centred on the first fit when that was poor (RMS > 0.5 px), starting
     from a repeated-median line (:func:`scipy.stats.siegelslopes`; the better
-    of the two fits is kept), and
-    extrapolated to that surface: the wall tops are the rim.
+    of the two fits is kept), and extrapolated to that surface: the wall tops
+    are the rim.
     """
     top = -0.5 * thickness
     depth = well.depth if np.isfinite(well.depth) else 4.0 * thickness
@@ -529,16 +527,17 @@ def find_chambers(view, *, thickness=None, min_width=20, chamber=None):
     if hi < 0.02:
         raise ValueError("no wells found: the strip under the membrane has the grey level of the water everywhere")
     liquid = mag < 0.5 * hi
-    # a speck of dust on the strip splits a well: runs closer than two membrane thicknesses are one well
-    # (the base between two real wells is wider than that)
-    merged = []
-    # (runs too short to be a well -- a speck on the base beside a wall looks like liquid -- are dropped first)
-    for s_, e_ in [(a_, b_) for a_, b_ in _well_intervals(liquid, None) if b_ - a_ >= min_width]:
-        if merged and s_ - merged[-1][1] < max(2.0 * thickness, 12.0):
-            merged[-1] = (merged[-1][0], e_)
+    # runs too short to be a well are dropped (a speck beside a wall looks like liquid), then runs closer
+    # than two membrane thicknesses are one well (a speck on the strip splits a well; the base between two
+    # real wells is wider than that)
+    runs = []
+    for s_, e_ in _well_intervals(liquid, None):
+        if e_ - s_ < min_width:
+            continue
+        if runs and s_ - runs[-1][1] < max(2.0 * thickness, 12.0):
+            runs[-1] = (runs[-1][0], e_)
         else:
-            merged.append((s_, e_))
-    runs = [(s, e) for s, e in merged if e - s >= min_width]
+            runs.append((s_, e_))
     inside = [(s, e) for s, e in runs if s > 0 and e < len(ucol)]
     if not runs:
         raise ValueError("no wells found under the membrane band")

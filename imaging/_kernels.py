@@ -1,4 +1,8 @@
-"""Compiled inner loops of the tracer (numba): transect sampling, band edges, the smooth path.
+"""Compiled inner loops of the tracer (numba).
+
+Transect sampling (with the view's rotation) and smoothing along stations,
+band edges, step edges, clipped line fits, the dynamic-programming path,
+banded least-squares cubic splines, nan medians and run lengths.
 
 Each kernel does what a short numpy/scipy expression does (named in its
 docstring, and checked against it in ``tests/imaging/test_kernels.py``) without
@@ -11,7 +15,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["sample_transects", "band_edges_rows", "viterbi_rows", "lsq_spline"]
+__all__ = ["sample_transects", "smoothed_transects", "ends_noise", "band_edges_rows", "step_crossing_rows",
+           "robust_line", "viterbi_rows", "lsq_spline", "fill_rows_nanmedian", "nanmedian", "longest_run"]
 
 
 @njit(cache=True, nogil=True)

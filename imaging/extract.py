@@ -180,7 +180,8 @@ def extract(
         default the most central well.  ``"all"``: every well whose two walls
         are in the field, traced side by side (each frame read once) and
         stacked along a ``chamber`` dimension (:func:`stack_chambers`); picked
-        points go to the chamber whose axis is nearest.
+        points go to the chamber they lie over (within 1.5 rim radii of its
+        axis; points over no traced chamber are dropped with a warning).
     errors : {"flag", "raise"}
         A frame that cannot be measured is flagged ``no_membrane`` and kept
         ("flag"), or raises ("raise").
@@ -258,8 +259,7 @@ def extract(
     # -- the tracers: one per chamber ------------------------------------------------------------
     first = src[0]
     tracers = _tracers(first, bulge_direction, chamber_region, settings)
-    k_rot = tracers[0].k
-    view = FrameView(first, k_rot)
+    view = FrameView(first, tracers[0].k)
     if len(tracers) == 1:
         parts_p, parts_m = [priors_px], [manual_px]
     else:  # picked points belong to the chamber over whose well their mean column lies
@@ -268,7 +268,8 @@ def extract(
 
         def owner(pts):
             d = np.abs(axes - float(np.mean(view.from_frame(pts[:, 1], pts[:, 0])[0])))
-            return int(np.argmin(d)) if d.min() <= reach[np.argmin(d)] else -1
+            c = int(np.argmin(d))
+            return c if d[c] <= reach[c] else -1
 
         orphans = sorted(i for d in (priors_px, manual_px) for i, v in d.items() if owner(v) < 0)
         if orphans:
@@ -303,9 +304,8 @@ def extract(
         if bar is not None:
             bar.stop()
 
-    parts = [_dataset(times, p, chamber_attrs, r.tracer, r.scal, r.flag, r.flag_figure, r.source_kind, r.message,
-                      r.px, r.pz, r.pcol, r.prow, r.plen, n_profile, src, settings, bulge_direction, chamber_region,
-                      errors, metadata, fit_prestretch, r.priors, r.manual) for r in runs]
+    parts = [_dataset(r, times, p, chamber_attrs, n_profile, src, settings, bulge_direction, chamber_region, errors,
+                      metadata, fit_prestretch) for r in runs]
     if chamber_region != "all":
         return parts[0]
     return stack_chambers(parts, [f"chamber-{c}" for c in range(len(parts))])
@@ -340,7 +340,6 @@ class _Run:
 
     def __init__(self, tracer, n, n_profile, priors, manual):
         self.tracer, self.n_profile, self.priors, self.manual = tracer, n_profile, priors, manual
-        self.view_shape = FrameView(np.empty(tracer.shape, np.uint8), tracer.k).shape
         self.scal = {k: np.full(n, np.nan) for k in (
             "bulge_height", "volume_left", "volume_right", "area_left", "area_right", "rim_radius", "residual_rms",
             "volume_disagreement", "dome_contrast", "gap_length", "rim_contact", "neighbour_gap", "tilt", "drift_x",
@@ -379,14 +378,19 @@ class _Run:
                 raise
             self.failed(i, err)
             return
-        _store(i, res, self.tracer, self.tracer.k, self.view_shape, frame.shape, p, self.n_profile, self.scal,
-               self.flag, self.flag_figure, self.source_kind, self.message, self.px, self.pz, self.pcol, self.prow,
-               self.plen)
+        _store(i, res, self, frame, p)
 
 
 #: per-chamber attributes that become variables over ``chamber`` when chambers are stacked
-_PER_CHAMBER = ("prestretch_c1", "prestretch_c2", "prestretch_frames", "reference_radius", "polarity",
-                "blur_sigma_px", "bulge_direction")
+_PER_CHAMBER = {  # name: (units or None, long name)
+    "prestretch_c1": ("1", "pre-stretch c1 of lambda_pre = 1 + c1 Vtilde + c2 Vtilde^2 (supplement Sec. 5.7)"),
+    "prestretch_c2": ("1", "pre-stretch c2 of lambda_pre = 1 + c1 Vtilde + c2 Vtilde^2 (supplement Sec. 5.7)"),
+    "prestretch_frames": (None, "frames in the pre-stretch fit"),
+    "reference_radius": ("m", "chamber radius a used for Vtilde, V/V0 and lambda_pre"),
+    "polarity": (None, "membrane contrast: +1 dark, -1 bright"),
+    "blur_sigma_px": ("px", "Gaussian blur of the optics measured in the first frame"),
+    "bulge_direction": (None, "direction the dome grows in the image"),
+}
 
 
 def stack_chambers(parts, names):
@@ -400,13 +404,16 @@ def stack_chambers(parts, names):
     ds = xr.concat(parts, dim="chamber", combine_attrs="override", coords="minimal", compat="override")
     ds = ds.assign_coords(chamber=("chamber", list(names), {"long_name": "chamber"}))
     for key, vals in per.items():
-        ds[key] = ("chamber", np.asarray(vals), {"long_name": f"{key} of each chamber"})
+        units, long_name = _PER_CHAMBER[key]
+        ds[key] = ("chamber", np.asarray(vals), {"long_name": long_name} | ({"units": units} if units else {}))
         ds.attrs.pop(key, None)
     return ds.transpose("time", "chamber", ...)
 
 
-def _store(i, res, tracer, k_rot, view_shape, frame_shape, p, n_profile, scal, flag, flag_figure, source_kind,
-           message, px, pz, pcol, prow, plen):
+def _store(i, res, run, frame, p):
+    """One frame's trace into the chamber's storage (SI), with the paper's ellipse description."""
+    scal, flag, flag_figure, source_kind, message = run.scal, run.flag, run.flag_figure, run.source_kind, run.message
+    px, pz, pcol, prow, plen, n_profile = run.px, run.pz, run.pcol, run.prow, run.plen, run.n_profile
     g = res.geometry
     flag[i] = res.flag
     flag_figure[i] = res.flag_figure
@@ -419,7 +426,7 @@ def _store(i, res, tracer, k_rot, view_shape, frame_shape, p, n_profile, scal, f
         scal[k][i] = v if np.isfinite(v) else (np.inf if v == np.inf else np.nan)
     if g is None:
         return
-    view = FrameView(np.empty(frame_shape, np.uint8), k_rot)
+    view = FrameView(frame, run.tracer.k)
     r, c = view.to_frame(g.line.x0, g.line.y0)
     scal["axis_col"][i], scal["axis_row"][i] = c, r
     # tilt of the device from its upright (bulge-up) view, counter-clockwise as displayed
@@ -482,9 +489,13 @@ def _ellipse_volume(ell):
     return m.volume
 
 
-def _dataset(times, p, chamber_attrs, tracer, scal, flag, flag_figure, source_kind, message, px, pz, pcol, prow,
-             plen, n_profile, src, settings, bulge_direction, chamber_region, errors, metadata, do_fit, priors_px,
-             manual_px):
+def _dataset(run, times, p, chamber_attrs, n_profile, src, settings, bulge_direction, chamber_region, errors,
+             metadata, do_fit):
+    """One chamber's storage -> its Dataset (SI, CF attributes), with the pre-stretch fit."""
+    tracer, scal, flag, flag_figure, source_kind, message = (run.tracer, run.scal, run.flag, run.flag_figure,
+                                                             run.source_kind, run.message)
+    px, pz, pcol, prow, plen, priors_px, manual_px = run.px, run.pz, run.pcol, run.prow, run.plen, run.priors, \
+        run.manual
     n = len(times)
     ok = np.array([f == "ok" for f in flag])
     volume = 0.5 * (scal["volume_left"] + scal["volume_right"])

@@ -21,6 +21,7 @@ smoothing spline converges as :math:`O(h^2)`.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import partial
 
 import numpy as np
 from scipy import interpolate
@@ -293,17 +294,6 @@ def sorted_quantile(x, q):
     return np.interp(np.asarray(q, float) * (len(x) - 1), np.arange(len(x)), x)
 
 
-@dataclass(frozen=True)
-class _Inverse:
-    """Spline parameter at arc length: linear interpolation of the dense arc-length table (monotone)."""
-
-    s: np.ndarray
-    u: np.ndarray
-
-    def __call__(self, s):
-        return np.interp(s, self.s, self.u)
-
-
 def _arc_length_table(spl, n=4001):
     u = np.linspace(0.0, 1.0, n)
     d = np.asarray(spl.derivative()(u))
@@ -380,7 +370,7 @@ def smooth_profile(points, *, sigma=None, smoothing=None, weights=None, knot_spa
     else:
         spl, u = interpolate.make_splprep(pts_ok.T, u=u, s=float(smoothing), w=ww, k=3)
     uu, ss = _arc_length_table(spl, n=int(np.clip(8 * (len(spl.t) - 7), 1025, 4001)))  # 8 per knot span
-    u_of_s = _Inverse(ss, uu)
+    u_of_s = partial(np.interp, xp=ss, fp=uu)  # arc length -> spline parameter (monotone table)
     fitted = np.asarray(spl(u)).T
     res = np.full(len(pts), np.nan)
     idx = np.flatnonzero(ok)[keep]

@@ -56,7 +56,7 @@ from osmobulge.imaging._chamber import (
     measure_line,
     measure_walls,
 )
-from osmobulge.imaging._kernels import ends_noise, longest_run, lsq_spline, nanmedian, smoothed_transects
+from osmobulge.imaging._kernels import ends_noise, longest_run, lsq_spline, smoothed_transects
 from osmobulge.imaging._normals import polyline_normals, resample_polyline, viterbi_path
 from osmobulge.imaging.geometry import revolution_measures, smooth_profile, sorted_quantile
 
@@ -362,9 +362,9 @@ class ChamberTracer:
         While tracking (the last frame was good) the chamber is looked for where
         the last frame put it: first with the fine line fit alone (a vertical
         drift of a few px), then with the wide line search before it (up to
-        ``max_drift``; the walls always get their wide search); the phase correlation of the base runs first
-        otherwise, and again when the tracked geometry is implausible (walls
-        lost, or the rim radius jumped).
+        ``max_drift``; the walls always get their wide search).  Otherwise, and
+        again when the tracked geometry is implausible (walls lost, or the rim
+        radius jumped), the phase correlation of the base runs first.
         """
         if self._tracking and self.prev is not None and self.prev.geometry is not None:
             geom, drift = self._geometry_at(view, self._drift.copy(), coarse=False)
@@ -516,7 +516,7 @@ class ChamberTracer:
                 "station_pts": pts, "normals": nrm, "half": w}
 
     def _exclusion(self, g, u, z):
-        """Points too close to the flat band at or beyond the rims, or to a rim point, (merged with it) are not trusted.
+        """Points merged with the flat band (at or beyond the rims, or close to a rim point) are not trusted.
 
         Within half a band thickness, 2 px and two blur sigmas of the rim point
         the dome's band and the flat band's corner are one blob, also just
@@ -586,13 +586,11 @@ class ChamberTracer:
         if (q is None or q.index != p.index - 1 or p.index != index - 1 or len(q.u) < 4 or p.source != "auto"
                 or q.source != "auto"):
             return cur
-        fp = np.concatenate(([0.0], np.cumsum(np.hypot(np.diff(p.u), np.diff(p.z)))))
-        fq = np.concatenate(([0.0], np.cumsum(np.hypot(np.diff(q.u), np.diff(q.z)))))
+        fp, fq = (np.concatenate(([0.0], np.cumsum(np.hypot(np.diff(t.u), np.diff(t.z))))) for t in (p, q))
         if not (fp[-1] > 0 and fq[-1] > 0):
             return cur
-        x = fp / fp[-1]
-        old = np.column_stack((np.interp(x, fq / fq[-1], q.u), np.interp(x, fq / fq[-1], q.z)))
-        return 2.0 * cur - old
+        x, xq = fp / fp[-1], fq / fq[-1]
+        return 2.0 * cur - np.column_stack((np.interp(x, xq, q.u), np.interp(x, xq, q.z)))
 
     def _trustworthy(self, tr):
         """A tracked (not global) result good enough to keep: strong band along the whole dome.
@@ -628,11 +626,11 @@ class ChamberTracer:
             filled = np.interp(np.arange(len(mid)), np.flatnonzero(use), mid[use])
             med = ndi.median_filter(filled, 15, mode="nearest")
             dev = np.abs(mid - med)
-            mad = 1.4826 * nanmedian(dev[use])
+            mad = 1.4826 * _nanmedian(dev[use])
             use &= dev <= max(4.0 * mad, 1.0)
         d2 = np.diff(np.where(use, mid, np.nan), 2)
         d2 = d2[np.isfinite(d2)]
-        sigma = 1.4826 * nanmedian(np.abs(d2)) / np.sqrt(6.0) if d2.size > 10 else st.smoothing
+        sigma = 1.4826 * _nanmedian(np.abs(d2)) / np.sqrt(6.0) if d2.size > 10 else st.smoothing
         r.update(pu=pu, pz=pz, good=good, excluded=excl, use=use, sigma=float(np.clip(sigma, 0.01, 3.0)))
         return r
 
@@ -701,7 +699,7 @@ class ChamberTracer:
                 spl = cls._lsq(u, pts, np.where(keep, wts, 0.0), spacing)
                 res = np.hypot(*(spl(u) - pts).T)
                 sel = keep & inner
-                mad = 1.4826 * nanmedian(res[sel]) if sel.any() else 0.0
+                mad = 1.4826 * _nanmedian(res[sel]) if sel.any() else 0.0
                 new = np.isfinite(res) & (res <= max(3.5 * mad, floor))
                 if pinned:
                     new[[0, -1]] = True
@@ -810,7 +808,7 @@ class ChamberTracer:
         cd = np.nan_to_num(con[dome], nan=0.0)
         if cd.size:
             win = min(151, 2 * (cd.size // 2) + 1)
-            local = np.maximum(ndi.percentile_filter(cd, 80, size=win, mode="nearest"), 0.5 * nanmedian(cd))
+            local = np.maximum(ndi.percentile_filter(cd, 80, size=win, mode="nearest"), 0.5 * _nanmedian(cd))
             low = cd < np.maximum(0.3 * local, 3.0 * tr.get("noise", 0.0))
             fig["gap_length"] = float(longest_run(low, ds[dome]) / max(g.thickness, 1.0))
         else:
@@ -826,16 +824,13 @@ class ChamberTracer:
             if side.size < 5:  # no flat surface on this side in the field: use the other side's
                 side = self._flat_u
             fars.append(side[np.argsort(np.abs(side))[:15]])
-        # one sampling call: rim band (9 per side), far band and water above it (15 per side)
-        pts = np.concatenate([g.line.point(-uu, 0.0), g.line.point(uu, 0.0)]
-                             + [g.line.point(f, z) for f in fars for z in (0.0, zw)])
-        v = view.sample(pts[:, 0], pts[:, 1])
-        n0, n1, n2 = len(uu), len(fars[0]), len(fars[1])
-        bands = (v[:n0], v[n0:2 * n0])
-        o = 2 * n0
-        fars_v = ((v[o:o + n1], v[o + n1:o + 2 * n1]), (v[o + 2 * n1:o + 2 * n1 + n2], v[o + 2 * n1 + n2:]))
-        for band_v, (far_v, water_v) in zip(bands, fars_v, strict=True):
-            band, band_far, water = _nanmedian(band_v), _nanmedian(far_v), _nanmedian(water_v)
+        # one sampling call, per side: the band at the rim, the band far out and the water above it
+        groups = [g.line.point(u_, z_) for sgn, far in zip((-1.0, 1.0), fars, strict=True)
+                  for u_, z_ in ((sgn * uu, 0.0), (far, 0.0), (far, zw))]
+        pts = np.concatenate(groups)
+        v = np.split(view.sample(pts[:, 0], pts[:, 1]), np.cumsum([len(q) for q in groups])[:-1])
+        for k in (0, 3):
+            band, band_far, water = (_nanmedian(x) for x in v[k:k + 3])
             den = water - band_far
             vals.append(float((water - band) / den) if np.isfinite(den) and abs(den) > 0 else np.nan)
         fig["rim_contact"] = float(min(vals))
