@@ -179,6 +179,32 @@ def test_ellipse_fit_recovers_known_ellipse(center, axes, angle, arc):
     assert on.shape == (7, 2)
 
 
+@pytest.mark.parametrize("seed", range(8))
+def test_direct_ellipse_is_skimages_estimate(seed):
+    """The fast direct fit gives skimage's EllipseModel parameters (noisy arcs, whole ellipses, domes)."""
+    from skimage.measure import EllipseModel
+
+    from osmobulge.imaging.geometry import _direct_ellipse
+
+    rng = np.random.default_rng(seed)
+    a, b = rng.uniform(5.0, 300.0, 2)
+    th, c = rng.uniform(-3.0, 3.0), rng.uniform(-200.0, 200.0, 2)
+    t0 = rng.uniform(0, 2 * np.pi)
+    t = t0 + np.linspace(0.0, rng.uniform(0.8, 2 * np.pi), 150)
+    pts = np.c_[c[0] + a * np.cos(t) * np.cos(th) - b * np.sin(t) * np.sin(th),
+                c[1] + a * np.cos(t) * np.sin(th) + b * np.sin(t) * np.cos(th)]
+    pts += rng.normal(0, 0.01 * min(a, b), pts.shape)
+    ref = EllipseModel.from_estimate(pts)
+    fast = _direct_ellipse(pts)
+    assert ref and fast is not None
+    np.testing.assert_allclose(fast.center, ref.center, rtol=1e-9, atol=1e-9 * max(a, b))
+    np.testing.assert_allclose(fast.axis_lengths, ref.axis_lengths, rtol=1e-9)
+    assert fast.theta == pytest.approx(float(ref.theta), abs=1e-9)
+    # degenerate input: no ellipse from either
+    line = np.c_[np.arange(10.0), 2 * np.arange(10.0)]
+    assert _direct_ellipse(line) is None or not EllipseModel.from_estimate(line)
+
+
 def test_robust_ellipse_fit_rejects_outliers():
     rng = np.random.default_rng(3)
     t = np.linspace(0, np.pi, 200)
