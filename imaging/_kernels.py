@@ -17,7 +17,7 @@ from numba import njit
 
 __all__ = ["sample_transects", "smoothed_transects", "ends_noise", "band_edges_rows", "step_crossing_rows",
            "robust_line", "viterbi_rows", "lsq_spline", "fill_rows_nanmedian", "nanmedian", "longest_run",
-           "ellipse_distance_folded"]
+           "ellipse_distance_folded", "robust_profile_spline"]
 
 
 @njit(cache=True, nogil=True)
@@ -555,3 +555,215 @@ def ellipse_distance_folded(x, y, a, b, max_iter):
                 break
         out[i] = np.hypot(xi - a * a * xi / (u + d2), yi - b * b * yi / u)
     return out
+
+
+# ---------------------------------------------------------------------------- robust profile spline
+@njit(cache=True, nogil=True)
+def _span(t, k, n, x):
+    """Knot span l, k <= l <= n - 1, with t[l] <= x < t[l + 1] (the last point in the last span)."""
+    lo, hi = k, n
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        if t[mid] <= x:
+            lo = mid
+        else:
+            hi = mid
+    return lo
+
+
+@njit(cache=True, nogil=True)
+def _bspl_eval(t, c, k, x, out):
+    """Degree-k spline (coefficients c, shape (n, D)) at x: ``BSpline(t, c, k)(x)`` (x inside the base interval)."""
+    n = c.shape[0]
+    nd = c.shape[1]
+    b = np.empty(k + 1)
+    left = np.empty(k + 1)
+    right = np.empty(k + 1)
+    for i in range(x.shape[0]):
+        xi = x[i]
+        l = _span(t, k, n, xi)
+        b[0] = 1.0
+        for j in range(1, k + 1):
+            left[j] = xi - t[l + 1 - j]
+            right[j] = t[l + j] - xi
+            saved = 0.0
+            for r in range(j):
+                den = right[r + 1] + left[j - r]
+                tmp = b[r] / den if den != 0.0 else 0.0
+                b[r] = saved + right[r + 1] * tmp
+                saved = left[j - r] * tmp
+            b[j] = saved
+        for d in range(nd):
+            s = 0.0
+            for a in range(k + 1):
+                s += b[a] * c[l - k + a, d]
+            out[i, d] = s
+
+
+@njit(cache=True, nogil=True)
+def _quantile_knots(u, sel, spacing, chord, lo, hi):
+    """Cubic knots on [lo, hi], interior ones at quantiles of u[sel] without its ends (``_lsq``'s rule)."""
+    idx = np.flatnonzero(sel)
+    m = idx.shape[0]
+    n_int = int(np.floor(chord / spacing))
+    n_int = min(max(n_int, 0), max(m - 4, 0))
+    t = np.empty(n_int + 8)
+    t[:4] = lo
+    t[n_int + 4:] = hi
+    if n_int:
+        xs = u[idx[1:m - 1]]
+        nx = xs.shape[0]
+        for j in range(n_int):
+            q = (j + 1) / (n_int + 1) * (nx - 1)  # np.interp(q (n - 1), arange(n), x)
+            i0 = min(int(np.floor(q)), nx - 2) if nx > 1 else 0
+            f = q - i0
+            t[4 + j] = xs[i0] if nx == 1 else xs[i0] + f * (xs[i0 + 1] - xs[i0])
+    return t
+
+
+@njit(cache=True, nogil=True)
+def _weighted_fit(u, pts, w, t):
+    """Least-squares cubic spline coefficients (n, 2); ok False when the band system is not positive definite."""
+    n = t.shape[0] - 4
+    ata = np.zeros((n, 4))
+    aty = np.zeros((n, 2))
+    _lsq_normal(u, pts, t, w, ata, aty)
+    ok = _band_cholesky_solve(ata, aty)
+    if ok:
+        for i in range(n):
+            if not (np.isfinite(aty[i, 0]) and np.isfinite(aty[i, 1])):
+                ok = False
+    return aty, ok
+
+
+@njit(cache=True, nogil=True)
+def robust_profile_spline(U, Z, ks, pinned):
+    """The tracer's robust profile spline (``ChamberTracer._robust_fit`` with ``final=True``), compiled.
+
+    Stage 1: a stiff spline (knots ``max(15, 2.5 ks)`` apart) over the chord
+    parameter, up to 3 rounds of rejecting points beyond ``max(3.5 MAD, 1 px)``;
+    stage 2: one round with knots ``ks`` apart (floor 0.75 px); then
+    :func:`osmobulge.imaging.geometry.smooth_profile` of the kept points with
+    knots ``ks`` apart: the points re-parameterised by their own normalised
+    chord, the least-squares spline, residuals of all points and the
+    arc-length table (8 samples a knot span, 1025 to 4001).  The ends are
+    pinned (weight 10, always kept) when ``pinned``.
+
+    Returns ``status`` (0 ok; 1 a band system was not positive definite or
+    fewer than 4 distinct points were kept: the caller falls back to scipy),
+    ``keep``, final knots, coefficients (n, 2), residuals, and the table
+    ``(uu, ss)``.
+    """
+    n = U.shape[0]
+    pts = np.empty((n, 2))
+    pts[:, 0] = U
+    pts[:, 1] = Z
+    u = np.empty(n)
+    u[0] = 0.0
+    for i in range(1, n):
+        u[i] = u[i - 1] + max(np.hypot(U[i] - U[i - 1], Z[i] - Z[i - 1]), 1e-9)
+    wts = np.ones(n)
+    inner = np.ones(n, np.bool_)
+    if pinned:
+        wts[0] = wts[n - 1] = 10.0
+        inner[0] = inner[n - 1] = False
+    keep = np.ones(n, np.bool_)
+    empty_t = np.zeros(8)
+    empty_c = np.zeros((4, 2))
+    empty_v = np.zeros(1)
+    fit = np.empty((n, 2))
+    res = np.empty(n)
+    n_stages = 2
+    for stage in range(n_stages):
+        spacing = max(15.0, 2.5 * ks) if stage == 0 else ks
+        floor = 1.0 if stage == 0 else 0.75
+        iters = 3 if stage == 0 else 1
+        for _ in range(iters):
+            w = np.where(keep, wts, 0.0)
+            chord = 0.0
+            prev = -1
+            for i in range(n):
+                if w[i] > 0.0:
+                    if prev >= 0:
+                        chord += np.hypot(U[i] - U[prev], Z[i] - Z[prev])
+                    prev = i
+            t = _quantile_knots(u, w > 0.0, spacing, chord, u[0], u[n - 1])
+            c, ok = _weighted_fit(u, pts, w, t)
+            if not ok:
+                return 1, keep, empty_t, empty_c, empty_v, empty_v, empty_v
+            _bspl_eval(t, c, 3, u, fit)
+            cnt = 0
+            for i in range(n):
+                res[i] = np.hypot(fit[i, 0] - U[i], fit[i, 1] - Z[i])
+                if keep[i] and inner[i]:
+                    cnt += 1
+            sel = np.empty(cnt)
+            j = 0
+            for i in range(n):
+                if keep[i] and inner[i]:
+                    sel[j] = res[i]
+                    j += 1
+            mad = 1.4826 * np.median(sel) if cnt > 0 else 0.0
+            thr = max(3.5 * mad, floor)
+            new = np.empty(n, np.bool_)
+            same = True
+            total = 0
+            for i in range(n):
+                new[i] = np.isfinite(res[i]) and res[i] <= thr
+                if pinned and (i == 0 or i == n - 1):
+                    new[i] = True
+                if new[i] != keep[i]:
+                    same = False
+                if new[i]:
+                    total += 1
+            if same or total < 6:
+                break
+            keep = new
+    # smooth_profile(pts, knot_spacing=ks, weights=where(keep, wts, 0)): kept, distinct points
+    idx = np.flatnonzero(keep & np.isfinite(U) & np.isfinite(Z))
+    if idx.shape[0] == 0:
+        return 1, keep, empty_t, empty_c, empty_v, empty_v, empty_v
+    sub = pts[idx]
+    span = sub.max() - sub.min()
+    distinct = np.ones(idx.shape[0], np.bool_)
+    for j in range(1, idx.shape[0]):
+        distinct[j] = np.hypot(sub[j, 0] - sub[j - 1, 0], sub[j, 1] - sub[j - 1, 1]) > 1e-12 * (1.0 + span)
+    idx = idx[distinct]
+    m = idx.shape[0]
+    if m < 4:
+        return 1, keep, empty_t, empty_c, empty_v, empty_v, empty_v
+    p = pts[idx]
+    ww = wts[idx]
+    ch = np.empty(m)
+    ch[0] = 0.0
+    for j in range(1, m):
+        ch[j] = ch[j - 1] + np.hypot(p[j, 0] - p[j - 1, 0], p[j, 1] - p[j - 1, 1])
+    uf = ch / ch[m - 1]
+    t = _quantile_knots(uf, np.ones(m, np.bool_), ks, ch[m - 1], 0.0, 1.0)
+    c, ok = _weighted_fit(uf, p, ww, t)
+    if not ok:
+        return 1, keep, empty_t, empty_c, empty_v, empty_v, empty_v
+    pf = np.empty((m, 2))
+    _bspl_eval(t, c, 3, uf, pf)
+    resid = np.full(n, np.nan)
+    for j in range(m):
+        resid[idx[j]] = np.hypot(pf[j, 0] - p[j, 0], pf[j, 1] - p[j, 1])
+    # arc-length table: trapezoid rule on the speed of the derivative spline (degree 2, knots t[1:-1])
+    nc = c.shape[0]
+    dc = np.empty((nc - 1, 2))
+    for i in range(nc - 1):
+        h = t[i + 4] - t[i + 1]
+        for d in range(2):
+            dc[i, d] = 3.0 * (c[i + 1, d] - c[i, d]) / h if h > 0.0 else 0.0
+    nt = min(max(8 * (t.shape[0] - 7), 1025), 4001)
+    uu = np.linspace(0.0, 1.0, nt)
+    der = np.empty((nt, 2))
+    _bspl_eval(t[1:-1], dc, 2, uu, der)
+    ss = np.empty(nt)
+    ss[0] = 0.0
+    sp_prev = np.hypot(der[0, 0], der[0, 1])
+    for i in range(1, nt):
+        sp = np.hypot(der[i, 0], der[i, 1])
+        ss[i] = ss[i - 1] + 0.5 * (sp + sp_prev) * (uu[i] - uu[i - 1])
+        sp_prev = sp
+    return 0, keep, t, c, resid, uu, ss

@@ -39,8 +39,10 @@ from __future__ import annotations
 
 import warnings
 from dataclasses import dataclass, field, replace
+from functools import partial
 
 import numpy as np
+from scipy import interpolate
 from scipy import ndimage as ndi
 from skimage.graph import route_through_array
 from skimage.registration import phase_cross_correlation
@@ -56,9 +58,9 @@ from osmobulge.imaging._chamber import (
     measure_line,
     measure_walls,
 )
-from osmobulge.imaging._kernels import ends_noise, longest_run, lsq_spline, smoothed_transects
+from osmobulge.imaging._kernels import ends_noise, longest_run, lsq_spline, robust_profile_spline, smoothed_transects
 from osmobulge.imaging._normals import polyline_normals, resample_polyline, viterbi_path
-from osmobulge.imaging.geometry import revolution_measures, smooth_profile, sorted_quantile
+from osmobulge.imaging.geometry import ProfileSpline, revolution_measures, smooth_profile, sorted_quantile
 
 __all__ = ["TraceSettings", "FrameTrace", "ChamberTracer", "FLAGS", "trace_series"]
 
@@ -681,8 +683,23 @@ class ChamberTracer:
         The ends are pinned (weight 10) when ``pinned``.  Returns the final
         :class:`~osmobulge.imaging.geometry.ProfileSpline` (knots ``ks`` apart; or
         the stiff spline sampled every pixel when ``final`` is False) and the
-        mask of kept points.
+        mask of kept points.  The final fit runs compiled
+        (:func:`~osmobulge.imaging._kernels.robust_profile_spline`, the same
+        arithmetic as :meth:`_robust_fit_py`); scipy's solver takes over when a
+        band system is singular.
         """
+        if final:
+            U, Z = np.ascontiguousarray(U, np.float64), np.ascontiguousarray(Z, np.float64)
+            status, keep, t, c, res, uu, ss = robust_profile_spline(U, Z, float(ks), bool(pinned))
+            if status == 0:
+                spl = interpolate.BSpline.construct_fast(t, c, 3, axis=1)
+                return ProfileSpline(spline=spl, length=float(ss[-1]), residuals=res,
+                                     _u_of_s=partial(np.interp, xp=ss, fp=uu)), keep
+        return cls._robust_fit_py(U, Z, ks, pinned=pinned, final=final)
+
+    @classmethod
+    def _robust_fit_py(cls, U, Z, ks, *, pinned=True, final=True):
+        """:meth:`_robust_fit` in numpy/scipy (the guide's stiff curve, and the fallback of the compiled fit)."""
         pts = np.column_stack((U, Z))
         n = len(U)
         seg = np.hypot(*np.diff(pts, axis=0).T)

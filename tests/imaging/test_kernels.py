@@ -336,3 +336,27 @@ def test_big_endian_frames_are_sampled_like_native_ones():
     pts, d, offs = np.array([[10.3, 12.7], [20.0, 5.5]]), np.array([[0.6, 0.8], [1.0, 0.0]]), np.linspace(-3, 3, 7)
     np.testing.assert_array_equal(sample_transects(frame.astype(">u2"), 1, pts, d, offs),
                                   sample_transects(frame, 1, pts, d, offs))
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_robust_profile_spline_equals_numpy_fit(seed):
+    """The compiled robust spline: same kept points, curve, length and residuals as the numpy/scipy fit."""
+    from osmobulge.imaging.trace import ChamberTracer
+
+    rng = np.random.default_rng(seed)
+    R, n = rng.uniform(50, 200), int(rng.integers(30, 500))
+    th = np.linspace(np.pi, 0, n)
+    U = R * np.cos(th) * rng.uniform(0.8, 1.3)
+    Z = R * np.sin(th) * rng.uniform(0.3, 2.5) + rng.normal(0, rng.uniform(0.05, 1.0), n)
+    Z[[0, -1]] = 0.0
+    Z[rng.integers(5, n - 5, 3)] += rng.uniform(3, 10, 3)  # dust bumps: rejected by both
+    ks = rng.uniform(4, 15)
+    fast, keep_fast = ChamberTracer._robust_fit(U, Z, ks)
+    ref, keep_ref = ChamberTracer._robust_fit_py(U, Z, ks)
+    assert not keep_fast.all()
+    np.testing.assert_array_equal(keep_fast, keep_ref)
+    s = np.linspace(0, ref.length, 57)
+    np.testing.assert_allclose(fast(s), ref(s), rtol=0, atol=1e-9)
+    assert fast.length == pytest.approx(ref.length, rel=1e-12)
+    np.testing.assert_allclose(fast.residuals, ref.residuals, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(fast.tangent(s), ref.tangent(s), rtol=0, atol=1e-9)
