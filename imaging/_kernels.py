@@ -17,7 +17,7 @@ from numba import njit
 
 __all__ = ["sample_transects", "smoothed_transects", "ends_noise", "band_edges_rows", "step_crossing_rows",
            "robust_line", "viterbi_rows", "lsq_spline", "fill_rows_nanmedian", "nanmedian", "longest_run",
-           "ellipse_distance_folded", "robust_profile_spline"]
+           "ellipse_distance_folded", "robust_profile_spline", "strongest_edge", "native_frame"]
 
 
 @njit(cache=True, nogil=True)
@@ -50,6 +50,16 @@ def _sample_transects(frame, k, px, py, dx, dy, offsets, out):
             out[i, j] = a * (1.0 - fr) + b * fr
 
 
+def native_frame(frame):
+    """The frame as the kernels take it: C-contiguous, native byte order, not bool (no copy when it already is)."""
+    frame = np.ascontiguousarray(frame)
+    if frame.dtype == np.bool_:
+        return frame.astype(np.uint8)
+    if not frame.dtype.isnative:  # big-endian files (ImageJ's default TIFF byte order)
+        return frame.astype(frame.dtype.newbyteorder("="))
+    return frame
+
+
 def sample_transects(frame, k, points, directions, offsets):
     """Bilinear samples of ``frame`` seen rotated by ``k`` quarter turns along transects.
 
@@ -61,11 +71,7 @@ def sample_transects(frame, k, points, directions, offsets):
     -------
     ndarray of float64, shape (N, K)
     """
-    frame = np.ascontiguousarray(frame)
-    if frame.dtype == np.bool_:
-        frame = frame.astype(np.uint8)
-    elif not frame.dtype.isnative:  # big-endian files (ImageJ's default TIFF byte order)
-        frame = frame.astype(frame.dtype.newbyteorder("="))
+    frame = native_frame(frame)
     p = np.ascontiguousarray(points, np.float64).reshape(-1, 2)
     d = np.ascontiguousarray(directions, np.float64).reshape(-1, 2)
     o = np.ascontiguousarray(offsets, np.float64).ravel()
@@ -767,3 +773,65 @@ def robust_profile_spline(U, Z, ks, pinned):
         ss[i] = ss[i - 1] + 0.5 * (sp + sp_prev) * (uu[i] - uu[i - 1])
         sp_prev = sp
     return 0, keep, t, c, resid, uu, ss
+
+
+def strongest_edge(frame, k, px, py, dx, dy, offsets, sign):
+    """:func:`_strongest_edge` of any frame (see there)."""
+    return _strongest_edge(native_frame(frame), int(k) % 4, np.ascontiguousarray(px, np.float64),
+                           np.ascontiguousarray(py, np.float64), np.ascontiguousarray(dx, np.float64),
+                           np.ascontiguousarray(dy, np.float64), np.ascontiguousarray(offsets, np.float64),
+                           float(sign))
+
+
+@njit(cache=True, nogil=True)
+def _strongest_edge(frame, k, px, py, dx, dy, offsets, sign):
+    """Index of the strongest edge of one sign in the row-median of transects (-1 if any median is nan).
+
+    ``argmax(sign * np.gradient(ndi.gaussian_filter1d(nanmedian(transects, axis=0), 1.0)))``
+    (scipy's kernel: sigma 1, radius 4, mode "reflect"), as the tracer's coarse
+    wall search does for each wall.
+    """
+    n, m = px.shape[0], offsets.shape[0]
+    prof = np.empty((n, m))
+    _sample_transects(frame, k, px, py, dx, dy, offsets, prof)
+    med = np.empty(m)
+    col = np.empty(n)
+    for j in range(m):
+        c = 0
+        for i in range(n):
+            v = prof[i, j]
+            if np.isfinite(v):
+                col[c] = v
+                c += 1
+        if c == 0:
+            return -1
+        med[j] = np.median(col[:c])
+    wts = np.empty(9)
+    tot = 0.0
+    for q in range(9):
+        wts[q] = np.exp(-0.5 * (q - 4) ** 2)
+        tot += wts[q]
+    sm = np.empty(m)
+    for j in range(m):
+        s = 0.0
+        for q in range(9):
+            jj = j + q - 4
+            # mode "reflect": d c b a | a b c d | d c b a
+            while jj < 0 or jj >= m:
+                jj = -jj - 1 if jj < 0 else 2 * m - 1 - jj
+            s += wts[q] * med[jj]
+        sm[j] = s / tot
+    best, arg = -np.inf, 0
+    for j in range(m):
+        if m == 1:
+            gr = 0.0
+        elif j == 0:
+            gr = sm[1] - sm[0]
+        elif j == m - 1:
+            gr = sm[m - 1] - sm[m - 2]
+        else:
+            gr = 0.5 * (sm[j + 1] - sm[j - 1])
+        gr *= sign
+        if gr > best:
+            best, arg = gr, j
+    return arg

@@ -58,7 +58,8 @@ from osmobulge.imaging._chamber import (
     measure_line,
     measure_walls,
 )
-from osmobulge.imaging._kernels import ends_noise, longest_run, lsq_spline, robust_profile_spline, smoothed_transects
+from osmobulge.imaging._kernels import (ends_noise, longest_run, lsq_spline, robust_profile_spline, smoothed_transects,
+                                        strongest_edge)
 from osmobulge.imaging._normals import polyline_normals, resample_polyline, viterbi_path
 from osmobulge.imaging.geometry import ProfileSpline, revolution_measures, smooth_profile, sorted_quantile
 
@@ -346,16 +347,17 @@ class ChamberTracer:
         zs = top - np.linspace(0.2, 0.7, 9) * depth
         span = self.settings.max_drift
         out = {}
+        offs = np.arange(-span, span + 1e-9, 1.0)
+        d = line.direction
+        dx, dy = np.full(len(zs), d[0]), np.full(len(zs), d[1])
         for name, u0, slope, sign in (("u_left", well.u_left, well.slope_left, self._wall_sign),
                                       ("u_right", well.u_right, well.slope_right, -self._wall_sign)):
-            offs = np.arange(-span, span + 1e-9, 1.0)
-            uc = u0 + slope * (zs - top)
-            prof = _nanmedian(view.transects(line.point(uc, zs), np.broadcast_to(line.direction, (len(zs), 2)), offs),
-                              axis=0)
-            if not np.all(np.isfinite(prof)):
+            p = line.point(u0 + slope * (zs - top), zs)
+            # the strongest edge of the wall's sign in the median over rows, smoothed (sigma 1 px)
+            j = strongest_edge(view.frame, view.k, p[:, 0], p[:, 1], dx, dy, offs, float(sign))
+            if j < 0:
                 return well
-            grad = sign * np.gradient(ndi.gaussian_filter1d(prof, 1.0))
-            out[name] = u0 + float(offs[int(np.argmax(grad))])
+            out[name] = u0 + float(offs[j])
         return replace(well, **out)
 
     def measure_geometry(self, view):

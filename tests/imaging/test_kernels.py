@@ -360,3 +360,25 @@ def test_robust_profile_spline_equals_numpy_fit(seed):
     assert fast.length == pytest.approx(ref.length, rel=1e-12)
     np.testing.assert_allclose(fast.residuals, ref.residuals, rtol=0, atol=1e-9)
     np.testing.assert_allclose(fast.tangent(s), ref.tangent(s), rtol=0, atol=1e-9)
+
+
+@pytest.mark.parametrize(("k", "sign"), [(0, 1.0), (1, -1.0), (3, 1.0)])
+def test_strongest_edge_equals_numpy_reference(k, sign):
+    """The coarse wall search: argmax of the signed gradient of the smoothed row-median (some samples outside)."""
+    from osmobulge.imaging._kernels import strongest_edge
+
+    rng = np.random.default_rng(k)
+    frame = ndi.gaussian_filter(rng.random((90, 120)), 2.0) * 1000
+    view = FrameView(frame, k)
+    zs = np.linspace(5.0, 40.0, 9)
+    px, py = np.full(9, 30.0) + 0.1 * zs, zs
+    d = np.array([np.cos(0.05), np.sin(0.05)])
+    for x0 in (30.0, 2.0):  # the second reaches outside the frame on some rows
+        offs = np.arange(-12.0, 12.0 + 1e-9, 1.0)
+        prof = view.transects(np.c_[px - 30.0 + x0, py], np.broadcast_to(d, (9, 2)), offs)
+        with np.errstate(all="ignore"), __import__("warnings").catch_warnings():
+            __import__("warnings").simplefilter("ignore")
+            med = np.nanmedian(prof, axis=0)
+        want = -1 if not np.all(np.isfinite(med)) else int(np.argmax(sign * np.gradient(ndi.gaussian_filter1d(med, 1.0))))
+        got = strongest_edge(frame, k, px - 30.0 + x0, py, np.full(9, d[0]), np.full(9, d[1]), offs, sign)
+        assert got == want
