@@ -17,7 +17,8 @@ from numba import njit
 
 __all__ = ["sample_transects", "smoothed_transects", "ends_noise", "band_edges_rows", "step_crossing_rows",
            "robust_line", "viterbi_rows", "lsq_spline", "fill_rows_nanmedian", "nanmedian", "longest_run",
-           "ellipse_distance_folded", "robust_profile_spline", "strongest_edge", "native_frame"]
+           "ellipse_distance_folded", "robust_profile_spline", "strongest_edge", "native_frame",
+           "guide_transects", "revolution_halves"]
 
 
 @njit(cache=True, nogil=True)
@@ -835,3 +836,137 @@ def _strongest_edge(frame, k, px, py, dx, dy, offsets, sign):
         if gr > best:
             best, arg = gr, j
     return arg
+
+
+@njit(cache=True, nogil=True)
+def _guide_stations(gx, gy, step, smooth):
+    """Stations every ``step`` px along a polyline and their smoothed normals.
+
+    :func:`osmobulge.imaging._normals.resample_polyline` then
+    :func:`~osmobulge.imaging._normals.polyline_normals` (``smooth``: Gaussian
+    sigma of the tangents in stations, mode "nearest").
+    """
+    n = gx.shape[0]
+    s = np.empty(n)
+    s[0] = 0.0
+    keep = np.empty(n, np.bool_)
+    keep[0] = True
+    for i in range(1, n):
+        seg = np.hypot(gx[i] - gx[i - 1], gy[i] - gy[i - 1])
+        s[i] = s[i - 1] + seg
+        keep[i] = seg > 1e-9
+    idx = np.flatnonzero(keep)
+    xs, px, py = s[idx], gx[idx], gy[idx]
+    total = s[n - 1]
+    m = max(int(np.ceil(total / step)) + 1, 2)
+    si = np.empty(m)
+    dl = total / (m - 1)
+    for i in range(m):
+        si[i] = i * dl
+    si[m - 1] = total
+    pts = np.empty((m, 2))
+    nk = xs.shape[0]
+    j = 0
+    for i in range(m):  # np.interp(si, xs, p)
+        x = si[i]
+        if x >= xs[nk - 1]:
+            pts[i, 0], pts[i, 1] = px[nk - 1], py[nk - 1]
+            continue
+        if x <= xs[0]:
+            pts[i, 0], pts[i, 1] = px[0], py[0]
+            continue
+        while xs[j + 1] <= x:
+            j += 1
+        f = (x - xs[j]) / (xs[j + 1] - xs[j])
+        pts[i, 0] = px[j] + f * (px[j + 1] - px[j])
+        pts[i, 1] = py[j] + f * (py[j + 1] - py[j])
+    t = np.empty((m, 2))
+    for d in range(2):
+        t[0, d] = pts[1, d] - pts[0, d]
+        t[m - 1, d] = pts[m - 1, d] - pts[m - 2, d]
+        for i in range(1, m - 1):
+            t[i, d] = 0.5 * (pts[i + 1, d] - pts[i - 1, d])
+    if smooth > 0 and m > 5:
+        t = _fill_and_smooth(t, smooth)
+    nrm = np.empty((m, 2))
+    for i in range(m):
+        nn = max(np.hypot(t[i, 0], t[i, 1]), 1e-12)
+        nrm[i, 0] = t[i, 1] / nn
+        nrm[i, 1] = -t[i, 0] / nn
+    return pts, si, nrm
+
+
+def guide_transects(frame, k, guide, step, offsets, sigma):
+    """Stations along a guide, their normals and the smoothed transects there, in one compiled pass.
+
+    ``pts, s = resample_polyline(guide, step)``; ``nrm = polyline_normals(pts,
+    smooth=2 / step)``; ``prof = smoothed_transects(frame, k, pts, nrm,
+    offsets, sigma)``.  Returns ``pts, s, nrm, prof``.
+    """
+    g = np.asarray(guide, np.float64)
+    pts, s, nrm = _guide_stations(np.ascontiguousarray(g[:, 0]), np.ascontiguousarray(g[:, 1]), float(step),
+                                  2.0 / float(step))
+    off = np.ascontiguousarray(offsets, np.float64)
+    prof = np.empty((len(pts), len(off)))
+    _sample_transects(native_frame(frame), int(k) % 4, pts[:, 0].copy(), pts[:, 1].copy(), nrm[:, 0].copy(),
+                      nrm[:, 1].copy(), off, prof)
+    return pts, s, nrm, _fill_and_smooth(prof, float(sigma))
+
+
+@njit(cache=True, nogil=True)
+def _half_measures(r, z, close):
+    """Volume ``-sum(pi dz (r1^2 + r1 r2 + r2^2) / 3)`` (closed to z = 0) and area ``pi sum((r1 + r2) ds)``."""
+    v = 0.0
+    a = 0.0
+    n = r.shape[0]
+    for i in range(n - 1):
+        r1, r2, dz = r[i], r[i + 1], z[i + 1] - z[i]
+        v += dz * (r1 * r1 + r1 * r2 + r2 * r2) / 3.0
+        a += (r1 + r2) * np.hypot(r2 - r1, dz)
+    if close and n:
+        r1 = r[n - 1]
+        v += (0.0 - z[n - 1]) * (3.0 * r1 * r1) / 3.0
+    return -np.pi * v, np.pi * a
+
+
+@njit(cache=True, nogil=True)
+def revolution_halves(x, z, close):
+    """Both halves' volumes and areas about the axis, the apex height and the rim ends, in one pass.
+
+    :func:`osmobulge.imaging.geometry.split_halves` (at the highest axis
+    crossing), then :func:`~osmobulge.imaging.geometry.revolution_volume` and
+    :func:`~osmobulge.imaging.geometry.revolution_area` of each half.  Returns
+    ``ok`` (False: the curve does not cross the axis) and
+    ``(v_left, v_right, a_left, a_right, height, rim_left, rim_right)``.
+    """
+    n = x.shape[0]
+    if x[0] > x[n - 1]:
+        x, z = x[::-1].copy(), z[::-1].copy()
+    best_i, best_z = -1, -np.inf
+    for i in range(n - 1):
+        s0, s1 = np.sign(x[i]), np.sign(x[i + 1])
+        if (s0 < 0 and s1 >= 0) or (s0 <= 0 and s1 > 0):
+            t = -x[i] / (x[i + 1] - x[i]) if x[i + 1] != x[i] else 0.0
+            zc = z[i] + t * (z[i + 1] - z[i])
+            if zc > best_z or best_i < 0:
+                best_i, best_z = i, zc
+    if best_i < 0:
+        return False, (np.nan, np.nan, np.nan, np.nan, np.nan, np.nan, np.nan)
+    i = best_i
+    skip_l = 1 if -x[i] <= 0 else 0
+    nl = i + 1 - skip_l
+    rl, zl = np.empty(nl + 1), np.empty(nl + 1)
+    rl[0], zl[0] = 0.0, best_z
+    for j in range(nl):
+        src = i - skip_l - j
+        rl[j + 1], zl[j + 1] = -x[src], z[src]
+    skip_r = 1 if (i + 1 < n and x[i + 1] <= 0) else 0
+    nr = n - (i + 1) - skip_r
+    rr, zr = np.empty(nr + 1), np.empty(nr + 1)
+    rr[0], zr[0] = 0.0, best_z
+    for j in range(nr):
+        src = i + 1 + skip_r + j
+        rr[j + 1], zr[j + 1] = x[src], z[src]
+    vl, al = _half_measures(rl, zl, close)
+    vr, ar = _half_measures(rr, zr, close)
+    return True, (vl, vr, al, ar, best_z, rl[nl], rr[nr])

@@ -27,7 +27,7 @@ import numpy as np
 from scipy import interpolate
 from skimage import measure
 
-from osmobulge.imaging._kernels import ellipse_distance_folded, lsq_spline
+from osmobulge.imaging._kernels import ellipse_distance_folded, lsq_spline, revolution_halves
 
 __all__ = [
     "EllipseFit",
@@ -618,13 +618,13 @@ def revolution_measures(x, z, *, close=True) -> RevolutionMeasures:
     >>> round(m.volume / (2 * np.pi / 3), 5), round(m.area / (2 * np.pi), 5)
     (1.0, 1.0)
     """
-    (rl, zl), (rr, zr) = split_halves(x, z)
-    return RevolutionMeasures(
-        volume_left=revolution_volume(rl, zl, close=close),
-        volume_right=revolution_volume(rr, zr, close=close),
-        area_left=revolution_area(rl, zl),
-        area_right=revolution_area(rr, zr),
-        height=float(zl[0]),
-        rim_left=float(rl[-1]),
-        rim_right=float(rr[-1]),
-    )
+    x = np.ascontiguousarray(x, np.float64)
+    z = np.ascontiguousarray(z, np.float64)
+    if x.shape != z.shape or x.ndim != 1 or x.size < 2:
+        raise ValueError(f"x and z must be 1-D of equal length >= 2, got {x.shape} and {z.shape}")
+    # split_halves, revolution_volume and revolution_area of each half, compiled in one pass
+    ok, (vl, vr, al, ar, height, rim_l, rim_r) = revolution_halves(x, z, bool(close))
+    if not ok:
+        raise ValueError("the curve does not cross the chamber axis (x = 0)")
+    return RevolutionMeasures(volume_left=vl, volume_right=vr, area_left=al, area_right=ar, height=height,
+                              rim_left=rim_l, rim_right=rim_r)

@@ -58,9 +58,9 @@ from osmobulge.imaging._chamber import (
     measure_line,
     measure_walls,
 )
-from osmobulge.imaging._kernels import (ends_noise, longest_run, lsq_spline, robust_profile_spline, smoothed_transects,
+from osmobulge.imaging._kernels import (ends_noise, guide_transects, longest_run, lsq_spline, robust_profile_spline,
                                         strongest_edge)
-from osmobulge.imaging._normals import polyline_normals, resample_polyline, viterbi_path
+from osmobulge.imaging._normals import resample_polyline, viterbi_path
 from osmobulge.imaging.geometry import ProfileSpline, revolution_measures, smooth_profile, sorted_quantile
 
 __all__ = ["TraceSettings", "FrameTrace", "ChamberTracer", "FLAGS", "trace_series"]
@@ -484,12 +484,11 @@ class ChamberTracer:
         guide = g.line.point(guide_uz[:, 0], guide_uz[:, 1])
         # the wide dynamic-programming pass samples twice as coarsely as the final ones
         step, sstep = (2.0 * st.station_step, 2.0 * st.sample_step) if dp else (st.station_step, st.sample_step)
-        pts, s = resample_polyline(guide, step)
-        nrm = polyline_normals(pts, smooth=2.0 / step)
-        # normals point to the left of travel; travel is left rim -> right rim, so "left" is outward (up)
+        # stations every `step` along the guide, their normals (to the left of travel; travel is left rim ->
+        # right rim, so "left" is outward, up) and the transects there, nan-filled and smoothed along the curve
         w = half + 0.5 * g.thickness
         offs = np.arange(-w, w + 1e-9, sstep)
-        prof = smoothed_transects(view.frame, view.k, pts, nrm, offs, 1.0 / step)  # nan-filled, smoothed along
+        pts, s, nrm, prof = guide_transects(view.frame, view.k, guide, step, offs, 1.0 / step)
         if dp:
             q = g.polarity * (np.median(prof, axis=1, keepdims=True) - prof)
             dec = max(1, int(round(3.0 / step)))

@@ -382,3 +382,50 @@ def test_strongest_edge_equals_numpy_reference(k, sign):
         want = -1 if not np.all(np.isfinite(med)) else int(np.argmax(sign * np.gradient(ndi.gaussian_filter1d(med, 1.0))))
         got = strongest_edge(frame, k, px - 30.0 + x0, py, np.full(9, d[0]), np.full(9, d[1]), offs, sign)
         assert got == want
+
+
+@pytest.mark.parametrize(("k", "step"), [(0, 2.0), (2, 4.0), (1, 0.7)])
+def test_guide_transects_equal_resample_normals_and_smoothed_transects(k, step):
+    """The fused station pass: resample_polyline, polyline_normals and smoothed_transects (repeated points too)."""
+    from osmobulge.imaging._kernels import guide_transects, smoothed_transects
+    from osmobulge.imaging._normals import polyline_normals, resample_polyline
+
+    rng = np.random.default_rng(k)
+    frame = ndi.gaussian_filter(rng.random((150, 160)), 1.5) * 4000
+    th = np.linspace(np.pi, 0, 40)
+    guide = np.c_[80 + 60 * np.cos(th), 120 - 125 * np.sin(th)]  # reaches outside the frame: nan samples filled
+    guide = np.insert(guide, 10, guide[10], axis=0)  # a repeated point
+    offs = np.arange(-9.0, 9.0 + 1e-9, 0.5)
+    pts_r, s_r = resample_polyline(guide, step)
+    nrm_r = polyline_normals(pts_r, smooth=2.0 / step)
+    prof_r = smoothed_transects(frame, k, pts_r, nrm_r, offs, 1.0 / step)
+    pts, s, nrm, prof = guide_transects(frame, k, guide, step, offs, 1.0 / step)
+    np.testing.assert_allclose(pts, pts_r, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(s, s_r, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(nrm, nrm_r, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(prof, prof_r, rtol=1e-9, atol=1e-6)
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_revolution_halves_equal_split_halves_and_measures(seed):
+    """Compiled revolution_measures against split_halves + revolution_volume/area (overhangs, axis points)."""
+    from osmobulge.imaging.geometry import revolution_area, revolution_measures, revolution_volume, split_halves
+
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(5, 400))
+    th = np.linspace(np.pi, 0, n)
+    x = rng.uniform(0.5, 2.0) * np.cos(th) * (1 + rng.uniform(0, 0.6) * np.sin(th) ** 2)  # overhangs its rim
+    z = rng.uniform(0.2, 3.0) * np.sin(th) + rng.normal(0, 0.01, n)
+    if seed % 3 == 0:
+        x[n // 2] = 0.0  # a point on the axis
+    if seed % 2:
+        x, z = x[::-1], z[::-1]
+    for close in (True, False):
+        m = revolution_measures(x, z, close=close)
+        (rl, zl), (rr, zr) = split_halves(x, z)
+        want = (revolution_volume(rl, zl, close=close), revolution_volume(rr, zr, close=close),
+                revolution_area(rl, zl), revolution_area(rr, zr), zl[0], rl[-1], rr[-1])
+        got = (m.volume_left, m.volume_right, m.area_left, m.area_right, m.height, m.rim_left, m.rim_right)
+        np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-14)
+    with pytest.raises(ValueError, match="does not cross"):
+        revolution_measures(np.abs(x) + 0.1, z)
