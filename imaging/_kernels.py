@@ -18,7 +18,7 @@ from numba import njit
 __all__ = ["sample_transects", "smoothed_transects", "ends_noise", "band_edges_rows", "step_crossing_rows",
            "robust_line", "viterbi_rows", "lsq_spline", "fill_rows_nanmedian", "nanmedian", "longest_run",
            "ellipse_distance_folded", "robust_profile_spline", "strongest_edge", "native_frame",
-           "guide_transects", "revolution_halves"]
+           "guide_transects", "revolution_halves", "clean_stations", "rim_bridge"]
 
 
 @njit(cache=True, nogil=True)
@@ -970,3 +970,138 @@ def revolution_halves(x, z, close):
     vl, al = _half_measures(rl, zl, close)
     vr, ar = _half_measures(rr, zr, close)
     return True, (vl, vr, al, ar, best_z, rl[nl], rr[nr])
+
+
+@njit(cache=True, nogil=True)
+def _excluded(u, z, R, zc, near):
+    """The tracer's rim zones: at or beyond a rim and low, or within ``near`` of a rim point."""
+    return (abs(u) > R - 1.0 and z < zc) or np.hypot(abs(u) - R, z) < near
+
+
+@njit(cache=True, nogil=True)
+def clean_stations(mid, contrast, spx, spy, nx, ny, x0, y0, dirx, diry, nrmx, nrmy, R, zc, near, min_con, win):
+    """Accepted stations of a pass (``ChamberTracer._clean``), compiled.
+
+    Band points in line coordinates; ``good``: finite with contrast above
+    ``min_con``; ``excl``: the band point or its station in a rim zone
+    (:func:`_excluded`); ``use``: good, not excluded and (with more than 10)
+    within ``max(4 MAD, 1 px)`` of the running median (``win`` stations,
+    mode "nearest") of the offsets filled by interpolation.  ``sigma_d2``:
+    robust sigma of the second differences of the used offsets (nan with 10
+    or fewer).  Returns ``pu, pz, good, excl, use, sigma_d2``.
+    """
+    n = mid.shape[0]
+    pu, pz = np.empty(n), np.empty(n)
+    good = np.empty(n, np.bool_)
+    excl = np.empty(n, np.bool_)
+    use = np.empty(n, np.bool_)
+    n_use = 0
+    for i in range(n):
+        m = mid[i] if np.isfinite(mid[i]) else 0.0
+        px, py = spx[i] + m * nx[i] - x0, spy[i] + m * ny[i] - y0
+        pu[i] = px * dirx + py * diry
+        pz[i] = px * nrmx + py * nrmy
+        qx, qy = spx[i] - x0, spy[i] - y0
+        good[i] = np.isfinite(mid[i]) and contrast[i] > min_con
+        excl[i] = _excluded(pu[i], pz[i], R, zc, near) or _excluded(qx * dirx + qy * diry, qx * nrmx + qy * nrmy,
+                                                                   R, zc, near)
+        use[i] = good[i] and not excl[i]
+        if use[i]:
+            n_use += 1
+    if n_use > 10:
+        idx = np.flatnonzero(use)
+        filled = np.empty(n)
+        j = 0
+        for i in range(n):  # np.interp(arange(n), idx, mid[idx])
+            if i <= idx[0]:
+                filled[i] = mid[idx[0]]
+            elif i >= idx[n_use - 1]:
+                filled[i] = mid[idx[n_use - 1]]
+            else:
+                while idx[j + 1] <= i:
+                    j += 1
+                f = (i - idx[j]) / (idx[j + 1] - idx[j])
+                filled[i] = mid[idx[j]] + f * (mid[idx[j + 1]] - mid[idx[j]])
+        h = win // 2
+        buf = np.empty(win)
+        dev = np.empty(n)
+        devu = np.empty(n_use)
+        c = 0
+        for i in range(n):  # ndi.median_filter(filled, win, mode="nearest")
+            for q in range(win):
+                buf[q] = filled[min(max(i + q - h, 0), n - 1)]
+            dev[i] = abs(mid[i] - np.median(buf))
+            if use[i]:
+                devu[c] = dev[i]
+                c += 1
+        thr = max(4.0 * 1.4826 * _nanmedian_flat(devu), 1.0)
+        for i in range(n):
+            use[i] = use[i] and dev[i] <= thr
+    d2 = np.empty(max(n - 2, 0))
+    c = 0
+    for i in range(n - 2):
+        if use[i] and use[i + 1] and use[i + 2]:
+            d2[c] = abs(mid[i + 2] - 2.0 * mid[i + 1] + mid[i])
+            c += 1
+    sigma = 1.4826 * np.median(d2[:c]) / np.sqrt(6.0) if c > 10 else np.nan
+    return pu, pz, good, excl, use, sigma
+
+
+@njit(cache=True, nogil=True)
+def rim_bridge(pu, pz, R, side, reach):
+    """Points bridging the untraceable foot of the dome to one rim (``ChamberTracer._bridge``), compiled.
+
+    The direction ``theta(rho)`` of the points seen from the rim point,
+    least-squares linear in the distance ``rho`` over the nearest ``reach`` px
+    (unwrapped), filled every px from the rim out to the nearest point.
+    Returns an (M, 2) array of ``(u, z)``.
+    """
+    n = pu.shape[0]
+    if n == 0:
+        return np.zeros((0, 2))
+    rho = np.empty(n)
+    rmin = np.inf
+    for i in range(n):
+        rho[i] = np.hypot(pu[i] - side * R, pz[i])
+        rmin = min(rmin, rho[i])
+    if rmin < 2.0:
+        return np.zeros((0, 2))
+    idx = np.flatnonzero(rho < rmin + reach)
+    m = idx.shape[0]
+    th = np.empty(m)
+    for j in range(m):
+        th[j] = np.arctan2(pz[idx[j]], side * (pu[idx[j]] - side * R))
+    if m >= 4:
+        y = th.copy()  # np.unwrap
+        corr = 0.0
+        for j in range(1, m):
+            dd = th[j] - th[j - 1]
+            ddmod = (dd + np.pi) - 2.0 * np.pi * np.floor((dd + np.pi) / (2.0 * np.pi)) - np.pi
+            if ddmod == -np.pi and dd > 0:
+                ddmod = np.pi
+            if abs(dd) >= np.pi:
+                corr += ddmod - dd
+            y[j] = th[j] + corr
+        xm, ym = 0.0, 0.0
+        for j in range(m):
+            xm += rho[idx[j]]
+            ym += y[j]
+        xm /= m
+        ym /= m
+        sxy, sxx = 0.0, 0.0
+        for j in range(m):
+            dx = rho[idx[j]] - xm
+            sxy += dx * (y[j] - ym)
+            sxx += dx * dx
+        c1 = sxy / max(sxx, 1e-300)
+        c0 = ym - c1 * xm
+    else:
+        c0, c1 = np.median(th), 0.0
+    k = int(np.ceil(rmin - 1.0))  # np.arange(1.0, rmin, 1.0)
+    out = np.empty((max(k, 0), 2))
+    for j in range(k):
+        rr = 1.0 + j
+        tt = c0 + c1 * rr
+        out[j, 0] = side * R + side * rr * np.cos(tt)
+        out[j, 1] = rr * np.sin(tt)
+    return out

@@ -58,8 +58,8 @@ from osmobulge.imaging._chamber import (
     measure_line,
     measure_walls,
 )
-from osmobulge.imaging._kernels import (ends_noise, guide_transects, longest_run, lsq_spline, robust_profile_spline,
-                                        strongest_edge)
+from osmobulge.imaging._kernels import (clean_stations, ends_noise, guide_transects, longest_run, lsq_spline,
+                                        rim_bridge, robust_profile_spline, strongest_edge)
 from osmobulge.imaging._normals import resample_polyline, viterbi_path
 from osmobulge.imaging.geometry import ProfileSpline, revolution_measures, smooth_profile, sorted_quantile
 
@@ -527,9 +527,12 @@ class ChamberTracer:
         bridge to the rim.
         """
         R = g.rim_radius
-        zc = g.thickness + 3.0
-        near = 0.5 * g.thickness + 2.0 + 2.0 * self.blur  # the corner blob: half a band and the blur around the rim
+        zc, near = self._exclusion_zone(g)
         return ((np.abs(u) > R - 1.0) & (z < zc)) | (np.hypot(np.abs(u) - R, z) < near)
+
+    def _exclusion_zone(self, g):
+        """Height below which the band beyond a rim is flat, and the radius of the corner blob at a rim point."""
+        return g.thickness + 3.0, 0.5 * g.thickness + 2.0 + 2.0 * self.blur  # half a band and the blur round the rim
 
     def trace_dome(self, view, g, guide=None, *, track=False):
         """Trace the dome given the frame geometry; returns a dict of results (chamber px).
@@ -614,26 +617,24 @@ class ChamberTracer:
                     and tr["edge_fraction"] < 0.05)
 
     def _clean(self, g, r, ref_con):
-        """Accepted stations of a pass: finite, enough contrast, outside the rim zones, not outliers."""
+        """Accepted stations of a pass: finite, enough contrast, outside the rim zones, not outliers.
+
+        A station sees the membrane when its band stands out of the flat band's
+        scale and the noise; outliers are far from a running median (15
+        stations) of the offsets along the curve.  Compiled
+        (:func:`~osmobulge.imaging._kernels.clean_stations`).
+        """
         st = self.settings
-        mid = r["mid"]
-        pts = r["station_pts"] + np.nan_to_num(mid)[:, None] * r["normals"]
-        pu, pz = g.line.coords(pts)
-        finite = np.isfinite(mid)
-        # a station sees the membrane when its band stands out of the flat band's scale and the noise
-        good = finite & (r["contrast"] > max(st.min_contrast * ref_con, 4.0 * r.get("noise", 0.0)))
-        excl = self._exclusion(g, pu, pz) | self._exclusion(g, *g.line.coords(r["station_pts"]))
-        use = good & ~excl
-        # outliers: far from a running median of the offsets along the curve
-        if use.sum() > 10:
-            filled = np.interp(np.arange(len(mid)), np.flatnonzero(use), mid[use])
-            med = ndi.median_filter(filled, 15, mode="nearest")
-            dev = np.abs(mid - med)
-            mad = 1.4826 * _nanmedian(dev[use])
-            use &= dev <= max(4.0 * mad, 1.0)
-        d2 = np.diff(np.where(use, mid, np.nan), 2)
-        d2 = d2[np.isfinite(d2)]
-        sigma = 1.4826 * _nanmedian(np.abs(d2)) / np.sqrt(6.0) if d2.size > 10 else st.smoothing
+        line = g.line
+        sp, nrm = r["station_pts"], r["normals"]
+        d, nv = line.direction, line.normal
+        pu, pz, good, excl, use, sigma = clean_stations(
+            np.ascontiguousarray(r["mid"], np.float64), np.ascontiguousarray(r["contrast"], np.float64),
+            np.ascontiguousarray(sp[:, 0]), np.ascontiguousarray(sp[:, 1]), np.ascontiguousarray(nrm[:, 0]),
+            np.ascontiguousarray(nrm[:, 1]), float(line.x0), float(line.y0), float(d[0]), float(d[1]), float(nv[0]),
+            float(nv[1]), float(g.rim_radius), *self._exclusion_zone(g),
+            float(max(st.min_contrast * ref_con, 4.0 * r.get("noise", 0.0))), 15)
+        sigma = st.smoothing if not np.isfinite(sigma) else sigma
         r.update(pu=pu, pz=pz, good=good, excluded=excl, use=use, sigma=float(np.clip(sigma, 0.01, 3.0)))
         return r
 
@@ -643,29 +644,12 @@ class ChamberTracer:
         Fits the direction ``theta(rho)`` of the traced points seen from the rim
         point, linear in the distance ``rho`` (a curve leaving the rim at an
         angle with a curvature), over the nearest ``reach`` px of trusted points,
-        and fills the gap from the rim out to them.
+        and fills the gap from the rim out to them (compiled:
+        :func:`~osmobulge.imaging._kernels.rim_bridge`; the angle is measured
+        from the outward direction, -u on the left and +u on the right, towards +z).
         """
-        R = g.rim_radius
-        du, dz = pu - side * R, pz
-        rho = np.hypot(du, dz)
-        if rho.size == 0:
-            return np.zeros((0, 2))
-        rmin = float(rho.min())
-        if rmin < 2.0:
-            return np.zeros((0, 2))
-        near = rho < rmin + reach
-        # angle measured from the outward direction (-u on the left, +u on the right) towards +z
-        th = np.arctan2(dz[near], side * du[near])
-        if near.sum() >= 4:
-            x, y = rho[near], np.unwrap(th)
-            dx = x - x.mean()
-            c1 = float(np.dot(dx, y - y.mean()) / max(float(np.dot(dx, dx)), 1e-300))  # least-squares line
-            c0 = float(y.mean()) - c1 * float(x.mean())
-        else:
-            c0, c1 = float(np.median(th)), 0.0
-        rr = np.arange(1.0, rmin, 1.0)
-        tt = c0 + c1 * rr
-        return np.column_stack((side * R + side * rr * np.cos(tt), rr * np.sin(tt)))
+        return rim_bridge(np.ascontiguousarray(pu, np.float64), np.ascontiguousarray(pz, np.float64),
+                          float(g.rim_radius), float(side), float(reach))
 
     @staticmethod
     def _lsq(u, pts, w, spacing):

@@ -429,3 +429,85 @@ def test_revolution_halves_equal_split_halves_and_measures(seed):
         np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-14)
     with pytest.raises(ValueError, match="does not cross"):
         revolution_measures(np.abs(x) + 0.1, z)
+
+
+def _ref_clean(tracer, g, r, ref_con):
+    """The tracer's former numpy ``_clean``."""
+    from osmobulge.imaging._chamber import _nanmedian
+
+    st = tracer.settings
+    mid = r["mid"]
+    pts = r["station_pts"] + np.nan_to_num(mid)[:, None] * r["normals"]
+    pu, pz = g.line.coords(pts)
+    good = np.isfinite(mid) & (r["contrast"] > max(st.min_contrast * ref_con, 4.0 * r.get("noise", 0.0)))
+    excl = tracer._exclusion(g, pu, pz) | tracer._exclusion(g, *g.line.coords(r["station_pts"]))
+    use = good & ~excl
+    if use.sum() > 10:
+        filled = np.interp(np.arange(len(mid)), np.flatnonzero(use), mid[use])
+        med = ndi.median_filter(filled, 15, mode="nearest")
+        dev = np.abs(mid - med)
+        mad = 1.4826 * _nanmedian(dev[use])
+        use &= dev <= max(4.0 * mad, 1.0)
+    d2 = np.diff(np.where(use, mid, np.nan), 2)
+    d2 = d2[np.isfinite(d2)]
+    sigma = 1.4826 * _nanmedian(np.abs(d2)) / np.sqrt(6.0) if d2.size > 10 else st.smoothing
+    return pu, pz, good, excl, use, float(np.clip(sigma, 0.01, 3.0))
+
+
+def _ref_bridge(R, pu, pz, side, reach=40.0):
+    """The tracer's former numpy ``_bridge``."""
+    du, dz = pu - side * R, pz
+    rho = np.hypot(du, dz)
+    if rho.size == 0:
+        return np.zeros((0, 2))
+    rmin = float(rho.min())
+    if rmin < 2.0:
+        return np.zeros((0, 2))
+    near = rho < rmin + reach
+    th = np.arctan2(dz[near], side * du[near])
+    if near.sum() >= 4:
+        x, y = rho[near], np.unwrap(th)
+        dx = x - x.mean()
+        c1 = float(np.dot(dx, y - y.mean()) / max(float(np.dot(dx, dx)), 1e-300))
+        c0 = float(y.mean()) - c1 * float(x.mean())
+    else:
+        c0, c1 = float(np.median(th)), 0.0
+    rr = np.arange(1.0, rmin, 1.0)
+    tt = c0 + c1 * rr
+    return np.column_stack((side * R + side * rr * np.cos(tt), rr * np.sin(tt)))
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_clean_and_bridge_equal_numpy_reference(seed):
+    """Station cleaning (outliers, rim zones, nan bands) and the rim bridges on a traced dome, against numpy."""
+    from dataclasses import replace
+
+    rng = np.random.default_rng(seed)
+    from osmobulge.imaging.synthetic import render_series
+    from osmobulge.imaging.trace import trace_series
+
+    s = render_series([0.0, 0.8 + 0.3 * seed], chamber=(100e-6, 50e-6, 10e-6), shape=(400, 420), seed=seed)
+    tr, traces = trace_series(s.frames)
+    g = traces[1].geometry
+    res = tr.trace_dome(FrameView(s.frames[1], tr.k), g, None)
+    r = {k: np.array(res[k]) for k in ("mid", "contrast", "station_pts", "normals")}
+    r["noise"] = res["noise"]
+    n = len(r["mid"])
+    r["mid"] = r["mid"] + rng.normal(0, 0.2, n)
+    r["mid"][rng.integers(0, n, 8)] += rng.uniform(-6, 6, 8)  # outliers
+    r["mid"][rng.integers(0, n, 4)] = np.nan
+    r["contrast"][rng.integers(0, n, 5)] = np.nan
+    g = replace(g, line=replace(g.line, angle=rng.uniform(-0.05, 0.05)))
+    ref_con = float(np.nanmedian(r["contrast"]))
+    want = _ref_clean(tr, g, r, ref_con)
+    got = tr._clean(g, dict(r), ref_con)
+    for key, w in zip(("pu", "pz", "good", "excluded", "use", "sigma"), want, strict=True):
+        np.testing.assert_allclose(got[key], w, rtol=0, atol=1e-9, err_msg=key)
+    assert 0 < got["use"].sum() < n
+    pu, pz = got["pu"][got["use"]], got["pz"][got["use"]]
+    for side in (-1.0, 1.0):
+        for sub in (slice(None), slice(0, 3)):  # the line fit, and fewer than 4 points (the median angle)
+            b_ref = _ref_bridge(g.rim_radius, pu[sub], pz[sub], side)
+            b = tr._bridge(g, pu[sub], pz[sub], side)
+            np.testing.assert_allclose(b, b_ref, rtol=0, atol=1e-9)
+    assert tr._bridge(g, pu[:0], pz[:0], 1.0).shape == (0, 2)
