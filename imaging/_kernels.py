@@ -18,7 +18,8 @@ from numba import njit
 __all__ = ["sample_transects", "smoothed_transects", "ends_noise", "band_edges_rows", "step_crossing_rows",
            "robust_line", "viterbi_rows", "lsq_spline", "fill_rows_nanmedian", "nanmedian", "longest_run",
            "ellipse_distance_folded", "robust_profile_spline", "strongest_edge", "native_frame",
-           "guide_transects", "revolution_halves", "clean_stations", "rim_bridge"]
+           "guide_transects", "revolution_halves", "clean_stations", "rim_bridge",
+           "abs_percentile"]
 
 
 @njit(cache=True, nogil=True)
@@ -644,7 +645,7 @@ def _weighted_fit(u, pts, w, t):
 
 
 @njit(cache=True, nogil=True)
-def robust_profile_spline(U, Z, ks, pinned):
+def robust_profile_spline(U, Z, ks, pinned, step):
     """The tracer's robust profile spline (``ChamberTracer._robust_fit`` with ``final=True``), compiled.
 
     Stage 1: a stiff spline (knots ``max(15, 2.5 ks)`` apart) over the chord
@@ -658,8 +659,8 @@ def robust_profile_spline(U, Z, ks, pinned):
 
     Returns ``status`` (0 ok; 1 a band system was not positive definite or
     fewer than 4 distinct points were kept: the caller falls back to scipy),
-    ``keep``, final knots, coefficients (n, 2), residuals, and the table
-    ``(uu, ss)``.
+    ``keep``, final knots, coefficients (n, 2), residuals, the table
+    ``(uu, ss)`` and the curve sampled every ``step`` of arc length.
     """
     n = U.shape[0]
     pts = np.empty((n, 2))
@@ -697,7 +698,7 @@ def robust_profile_spline(U, Z, ks, pinned):
             t = _quantile_knots(u, w > 0.0, spacing, chord, u[0], u[n - 1])
             c, ok = _weighted_fit(u, pts, w, t)
             if not ok:
-                return 1, keep, empty_t, empty_c, empty_v, empty_v, empty_v
+                return 1, keep, empty_t, empty_c, empty_v, empty_v, empty_v, empty_c
             _bspl_eval(t, c, 3, u, fit)
             cnt = 0
             for i in range(n):
@@ -729,7 +730,7 @@ def robust_profile_spline(U, Z, ks, pinned):
     # smooth_profile(pts, knot_spacing=ks, weights=where(keep, wts, 0)): kept, distinct points
     idx = np.flatnonzero(keep & np.isfinite(U) & np.isfinite(Z))
     if idx.shape[0] == 0:
-        return 1, keep, empty_t, empty_c, empty_v, empty_v, empty_v
+        return 1, keep, empty_t, empty_c, empty_v, empty_v, empty_v, empty_c
     sub = pts[idx]
     span = sub.max() - sub.min()
     distinct = np.ones(idx.shape[0], np.bool_)
@@ -738,7 +739,7 @@ def robust_profile_spline(U, Z, ks, pinned):
     idx = idx[distinct]
     m = idx.shape[0]
     if m < 4:
-        return 1, keep, empty_t, empty_c, empty_v, empty_v, empty_v
+        return 1, keep, empty_t, empty_c, empty_v, empty_v, empty_v, empty_c
     p = pts[idx]
     ww = wts[idx]
     ch = np.empty(m)
@@ -749,7 +750,7 @@ def robust_profile_spline(U, Z, ks, pinned):
     t = _quantile_knots(uf, np.ones(m, np.bool_), ks, ch[m - 1], 0.0, 1.0)
     c, ok = _weighted_fit(uf, p, ww, t)
     if not ok:
-        return 1, keep, empty_t, empty_c, empty_v, empty_v, empty_v
+        return 1, keep, empty_t, empty_c, empty_v, empty_v, empty_v, empty_c
     pf = np.empty((m, 2))
     _bspl_eval(t, c, 3, uf, pf)
     resid = np.full(n, np.nan)
@@ -773,7 +774,25 @@ def robust_profile_spline(U, Z, ks, pinned):
         sp = np.hypot(der[i, 0], der[i, 1])
         ss[i] = ss[i - 1] + 0.5 * (sp + sp_prev) * (uu[i] - uu[i - 1])
         sp_prev = sp
-    return 0, keep, t, c, resid, uu, ss
+    # the curve every `step` px of arc length (ProfileSpline.sample(step))
+    length = ss[nt - 1]
+    ns = max(int(np.ceil(length / step)) + 1, 2)
+    us = np.empty(ns)
+    j = 0
+    dl = length / (ns - 1)
+    for i in range(ns):  # np.interp(s, ss, uu)
+        x = length if i == ns - 1 else i * dl
+        if x <= ss[0]:
+            us[i] = uu[0]
+        elif x >= ss[nt - 1]:
+            us[i] = uu[nt - 1]
+        else:
+            while ss[j + 1] <= x:
+                j += 1
+            us[i] = uu[j] + (x - ss[j]) * (uu[j + 1] - uu[j]) / (ss[j + 1] - ss[j])
+    curve = np.empty((ns, 2))
+    _bspl_eval(t, c, 3, us, curve)
+    return 0, keep, t, c, resid, uu, ss, curve
 
 
 def strongest_edge(frame, k, px, py, dx, dy, offsets, sign):
@@ -1105,3 +1124,25 @@ def rim_bridge(pu, pz, R, side, reach):
         out[j, 0] = side * R + side * rr * np.cos(tt)
         out[j, 1] = rr * np.sin(tt)
     return out
+
+
+@njit(cache=True, nogil=True)
+def abs_percentile(x, mask, q):
+    """``np.percentile(np.abs(x[mask]), q)`` (linear interpolation; nan when the mask is empty)."""
+    n = 0
+    for i in range(x.shape[0]):
+        if mask[i]:
+            n += 1
+    if n == 0:
+        return np.nan
+    v = np.empty(n)
+    j = 0
+    for i in range(x.shape[0]):
+        if mask[i]:
+            v[j] = abs(x[i])
+            j += 1
+    v.sort()
+    pos = q / 100.0 * (n - 1)
+    lo = int(np.floor(pos))
+    hi = min(lo + 1, n - 1)
+    return v[lo] + (pos - lo) * (v[hi] - v[lo])

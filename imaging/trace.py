@@ -58,7 +58,7 @@ from osmobulge.imaging._chamber import (
     measure_line,
     measure_walls,
 )
-from osmobulge.imaging._kernels import (clean_stations, ends_noise, guide_transects, longest_run, lsq_spline,
+from osmobulge.imaging._kernels import (abs_percentile, clean_stations, ends_noise, guide_transects, longest_run, lsq_spline,
                                         rim_bridge, robust_profile_spline, strongest_edge)
 from osmobulge.imaging._normals import resample_polyline, viterbi_path
 from osmobulge.imaging.geometry import ProfileSpline, revolution_measures, smooth_profile, sorted_quantile
@@ -254,6 +254,7 @@ class ChamberTracer:
         self.priors = {}  # frame index -> (u, z) guide in chamber px
         # flat-line columns: away from every well's rim
         self._flat_u = self._flat_columns(view)
+        self._rim_contact_u = None  # flat columns sampled for the rim contact (set on first use)
 
     # ---------------------------------------------------------------------- geometry
     def _estimate_blur(self, view):
@@ -674,13 +675,21 @@ class ChamberTracer:
         band system is singular.
         """
         if final:
-            U, Z = np.ascontiguousarray(U, np.float64), np.ascontiguousarray(Z, np.float64)
-            status, keep, t, c, res, uu, ss = robust_profile_spline(U, Z, float(ks), bool(pinned))
-            if status == 0:
-                spl = interpolate.BSpline.construct_fast(t, c, 3, axis=1)
-                return ProfileSpline(spline=spl, length=float(ss[-1]), residuals=res,
-                                     _u_of_s=partial(np.interp, xp=ss, fp=uu)), keep
+            spl, keep, _ = cls._final_fit(U, Z, ks, pinned=pinned)
+            return spl, keep
         return cls._robust_fit_py(U, Z, ks, pinned=pinned, final=final)
+
+    @classmethod
+    def _final_fit(cls, U, Z, ks, *, pinned=True, step=1.0):
+        """:meth:`_robust_fit` (final), and its curve sampled every ``step`` px of arc length (N, 2)."""
+        U, Z = np.ascontiguousarray(U, np.float64), np.ascontiguousarray(Z, np.float64)
+        status, keep, t, c, res, uu, ss, curve = robust_profile_spline(U, Z, float(ks), bool(pinned), float(step))
+        if status == 0:
+            spl = interpolate.BSpline.construct_fast(t, c, 3, axis=1)
+            return ProfileSpline(spline=spl, length=float(ss[-1]), residuals=res,
+                                 _u_of_s=partial(np.interp, xp=ss, fp=uu)), keep, curve
+        spl, keep = cls._robust_fit_py(U, Z, ks, pinned=pinned)
+        return spl, keep, spl.sample(step=step)[1]
 
     @classmethod
     def _robust_fit_py(cls, U, Z, ks, *, pinned=True, final=True):
@@ -742,7 +751,7 @@ class ChamberTracer:
         use = r["use"]
         if use.sum() < 6:
             return None
-        motion = moved = float(np.percentile(np.abs(r["mid"][use]), 90))
+        motion = moved = float(abs_percentile(r["mid"], use, 90.0))
         if track and motion > half - 2.0 - 2.0 * self.blur:
             # the band came close to the window's end (the prediction was off): its edges and width are
             # not to be trusted -- the wide search takes over
@@ -765,7 +774,7 @@ class ChamberTracer:
             use = r["use"]
             if use.sum() < 6:
                 return None
-            moved = float(np.percentile(np.abs(r["mid"][use]), 90))
+            moved = float(abs_percentile(r["mid"], use, 90.0))
             if moved < 1.0:
                 break
             uz = self._offset_guide(g, r) if track else self._guide_from(g, r, ks)
@@ -776,9 +785,8 @@ class ChamberTracer:
         U = np.concatenate(([-R], bl[:, 0], pu, br[::-1, 0], [R]))
         Z = np.concatenate(([0.0], bl[:, 1], pz, br[::-1, 1], [0.0]))
         ks = float(np.clip(4.0 + 10.0 * r["sigma"], 4.0, 15.0))
-        spl, keep = self._robust_fit(U, Z, ks)
+        spl, keep, puz = self._final_fit(U, Z, ks)
         res = spl.residuals
-        _, puz = spl.sample(step=1.0)
         inner = keep.copy()
         inner[[0, -1]] = False
         edge = (np.abs(r["lo"]) > r["half"] - 1.0) | (np.abs(r["hi"]) > r["half"] - 1.0)
@@ -820,17 +828,19 @@ class ChamberTracer:
         uu = R + np.linspace(0.02, 0.1, 9) * R
         zw = 0.5 * g.thickness + 3.0 * self.blur + 4.0
         vals = []
-        fars = []
-        for sgn in (-1.0, 1.0):
-            side = self._flat_u[np.sign(self._flat_u) == sgn]
-            if side.size < 5:  # no flat surface on this side in the field: use the other side's
-                side = self._flat_u
-            fars.append(side[np.argsort(np.abs(side))[:15]])
+        if self._rim_contact_u is None:  # the flat columns nearest the axis on each side (fixed for the series)
+            fars = []
+            for sgn in (-1.0, 1.0):
+                side = self._flat_u[np.sign(self._flat_u) == sgn]
+                if side.size < 5:  # no flat surface on this side in the field: use the other side's
+                    side = self._flat_u
+                fars.append(side[np.argsort(np.abs(side))[:15]])
+            self._rim_contact_u = fars
         # one sampling call, per side: the band at the rim, the band far out and the water above it
-        groups = [g.line.point(u_, z_) for sgn, far in zip((-1.0, 1.0), fars, strict=True)
-                  for u_, z_ in ((sgn * uu, 0.0), (far, 0.0), (far, zw))]
-        pts = np.concatenate(groups)
-        v = np.split(view.sample(pts[:, 0], pts[:, 1]), np.cumsum([len(q) for q in groups])[:-1])
+        uz = [(u_, np.full(len(u_), z_)) for sgn, far in zip((-1.0, 1.0), self._rim_contact_u, strict=True)
+              for u_, z_ in ((sgn * uu, 0.0), (far, 0.0), (far, zw))]
+        pts = g.line.point(np.concatenate([q[0] for q in uz]), np.concatenate([q[1] for q in uz]))
+        v = np.split(view.sample(pts[:, 0], pts[:, 1]), np.cumsum([len(q[0]) for q in uz])[:-1])
         for k in (0, 3):
             band, band_far, water = (_nanmedian(x) for x in v[k:k + 3])
             den = water - band_far

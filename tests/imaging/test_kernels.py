@@ -360,6 +360,21 @@ def test_robust_profile_spline_equals_numpy_fit(seed):
     assert fast.length == pytest.approx(ref.length, rel=1e-12)
     np.testing.assert_allclose(fast.residuals, ref.residuals, rtol=0, atol=1e-9)
     np.testing.assert_allclose(fast.tangent(s), ref.tangent(s), rtol=0, atol=1e-9)
+    _, _, curve = ChamberTracer._final_fit(U, Z, ks, step=1.0)
+    np.testing.assert_allclose(curve, ref.sample(step=1.0)[1], rtol=0, atol=1e-9)
+
+
+def test_abs_percentile_equals_numpy():
+    from osmobulge.imaging._kernels import abs_percentile
+
+    rng = np.random.default_rng(0)
+    for n in (1, 2, 7, 400):
+        x = rng.normal(0, 3, n)
+        m = rng.random(n) < 0.7
+        m[0] = True
+        for q in (0.0, 50.0, 90.0, 100.0):
+            assert abs_percentile(x, m, q) == pytest.approx(np.percentile(np.abs(x[m]), q), rel=1e-12, abs=1e-15)
+    assert np.isnan(abs_percentile(np.ones(3), np.zeros(3, bool), 90.0))
 
 
 @pytest.mark.parametrize(("k", "sign"), [(0, 1.0), (1, -1.0), (3, 1.0)])
