@@ -19,7 +19,7 @@ __all__ = ["sample_transects", "smoothed_transects", "ends_noise", "band_edges_r
            "robust_line", "viterbi_rows", "lsq_spline", "fill_rows_nanmedian", "nanmedian", "longest_run",
            "ellipse_distance_folded", "robust_profile_spline", "strongest_edge", "native_frame",
            "guide_transects", "revolution_halves", "clean_stations", "rim_bridge",
-           "abs_percentile"]
+           "abs_percentile", "ellipse_scatter", "ellipse_arc_volume"]
 
 
 @njit(cache=True, nogil=True)
@@ -1146,3 +1146,83 @@ def abs_percentile(x, mask, q):
     lo = int(np.floor(pos))
     hi = min(lo + 1, n - 1)
     return v[lo] + (pos - lo) * (v[hi] - v[lo])
+
+
+@njit(cache=True, nogil=True)
+def ellipse_scatter(x, y):
+    """Centroid, scale and the scatter matrices of Halir & Flusser's direct ellipse fit (normalised points).
+
+    ``d = (p - mean) / std``; ``D1 = [x^2, x y, y^2]``, ``D2 = [x, y, 1]``;
+    returns ``x0, y0, scale, D1'D1, D1'D2, D2'D2``.
+    """
+    n = x.shape[0]
+    x0 = 0.0
+    y0 = 0.0
+    for i in range(n):
+        x0 += x[i]
+        y0 += y[i]
+    x0 /= n
+    y0 /= n
+    var = 0.0
+    for i in range(n):
+        var += (x[i] - x0) ** 2 + (y[i] - y0) ** 2
+    scale = np.sqrt(var / (2 * n))  # np.std of all 2n centred coordinates
+    S1 = np.zeros((3, 3))
+    S2 = np.zeros((3, 3))
+    S3 = np.zeros((3, 3))
+    if not scale > 0:
+        return x0, y0, scale, S1, S2, S3
+    d1 = np.empty(3)
+    d2 = np.empty(3)
+    for i in range(n):
+        u = (x[i] - x0) / scale
+        v = (y[i] - y0) / scale
+        d1[0], d1[1], d1[2] = u * u, u * v, v * v
+        d2[0], d2[1], d2[2] = u, v, 1.0
+        for a in range(3):
+            for b in range(3):
+                S1[a, b] += d1[a] * d1[b]
+                S2[a, b] += d1[a] * d2[b]
+                S3[a, b] += d2[a] * d2[b]
+    return x0, y0, scale, S1, S2, S3
+
+
+@njit(cache=True, nogil=True)
+def ellipse_arc_volume(xc, yc, a, b, theta, n):
+    """Volume of revolution of an ellipse's arc above z = 0, as an ``n``-point polygon (nan if it does not cross).
+
+    The polygon ``t = linspace(0, 2 pi, n)`` rolled so the arc above z = 0 is
+    contiguous, then :func:`revolution_halves` (mean of the two halves).
+    """
+    ct, st = np.cos(theta), np.sin(theta)
+    ex = np.empty(n)
+    ez = np.empty(n)
+    above = np.empty(n, np.bool_)
+    n_above = 0
+    last_below = -1
+    for i in range(n):
+        t = 2.0 * np.pi * i / (n - 1) if i < n - 1 else 2.0 * np.pi
+        ex[i] = xc + a * np.cos(t) * ct - b * np.sin(t) * st
+        ez[i] = yc + a * np.cos(t) * st + b * np.sin(t) * ct
+        above[i] = ez[i] >= 0
+        if above[i]:
+            n_above += 1
+        else:
+            last_below = i
+    if n_above == 0 or n_above == n:
+        return np.nan
+    start = last_below + 1
+    m = 0
+    while m < n and above[(start + m) % n]:
+        m += 1
+    if m < 3:
+        return np.nan
+    ax = np.empty(m)
+    az = np.empty(m)
+    for j in range(m):
+        ax[j] = ex[(start + j) % n]
+        az[j] = ez[(start + j) % n]
+    ok, meas = revolution_halves(ax, az, True)
+    if not ok:
+        return np.nan
+    return 0.5 * (meas[0] + meas[1])

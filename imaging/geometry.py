@@ -27,7 +27,7 @@ import numpy as np
 from scipy import interpolate
 from skimage import measure
 
-from osmobulge.imaging._kernels import ellipse_distance_folded, lsq_spline, revolution_halves
+from osmobulge.imaging._kernels import ellipse_distance_folded, ellipse_scatter, lsq_spline, revolution_halves
 
 __all__ = [
     "EllipseFit",
@@ -163,16 +163,10 @@ def _direct_ellipse(pts):
     which cost about 0.3 ms a fit: the extraction fits one per frame.  None
     when no ellipse satisfies the constraint (or the points are degenerate).
     """
-    origin = pts.mean(axis=0)
-    d = pts - origin
-    scale = float(d.std())
-    if scale < np.finfo(float).tiny:
+    x0, y0, scale, S1, S2, S3 = ellipse_scatter(np.ascontiguousarray(pts[:, 0]), np.ascontiguousarray(pts[:, 1]))
+    if not scale >= np.finfo(float).tiny:
         return None
-    d = d / scale
-    x, y = d[:, 0], d[:, 1]
-    D1 = np.column_stack((x * x, x * y, y * y))
-    D2 = np.column_stack((x, y, np.ones_like(x)))
-    S1, S2, S3 = D1.T @ D1, D1.T @ D2, D2.T @ D2
+    origin = np.array([x0, y0])
     try:
         T = -np.linalg.solve(S3, S2.T)
     except np.linalg.LinAlgError:

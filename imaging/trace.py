@@ -58,8 +58,17 @@ from osmobulge.imaging._chamber import (
     measure_line,
     measure_walls,
 )
-from osmobulge.imaging._kernels import (abs_percentile, clean_stations, ends_noise, guide_transects, longest_run, lsq_spline,
-                                        rim_bridge, robust_profile_spline, strongest_edge)
+from osmobulge.imaging._kernels import (
+    abs_percentile,
+    clean_stations,
+    ends_noise,
+    guide_transects,
+    longest_run,
+    lsq_spline,
+    rim_bridge,
+    robust_profile_spline,
+    strongest_edge,
+)
 from osmobulge.imaging._normals import resample_polyline, viterbi_path
 from osmobulge.imaging.geometry import ProfileSpline, revolution_measures, smooth_profile, sorted_quantile
 
