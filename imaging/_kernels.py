@@ -26,19 +26,21 @@ __all__ = ["sample_transects", "smoothed_transects", "ends_noise", "band_edges_r
 def _sample_transects(frame, k, px, py, dx, dy, offsets, out):
     h, w = frame.shape
     n, m = out.shape
+    hm, wm = h - 1.0, w - 1.0
     for i in range(n):
+        # the view's rotation as a linear map: stored (row, col) = start + offset * (drow, dcol)
+        if k == 0:
+            rs, cs, dr, dc = py[i], px[i], dy[i], dx[i]
+        elif k == 1:
+            rs, cs, dr, dc = px[i], wm - py[i], dx[i], -dy[i]
+        elif k == 2:
+            rs, cs, dr, dc = hm - py[i], wm - px[i], -dy[i], -dx[i]
+        else:
+            rs, cs, dr, dc = hm - px[i], py[i], -dx[i], dy[i]
         for j in range(m):
-            x = px[i] + offsets[j] * dx[i]
-            y = py[i] + offsets[j] * dy[i]
-            if k == 0:
-                r, c = y, x
-            elif k == 1:
-                r, c = x, w - 1.0 - y
-            elif k == 2:
-                r, c = h - 1.0 - y, w - 1.0 - x
-            else:
-                r, c = h - 1.0 - x, y
-            if not (r >= 0.0 and r <= h - 1.0 and c >= 0.0 and c <= w - 1.0):
+            r = rs + offsets[j] * dr
+            c = cs + offsets[j] * dc
+            if not (r >= 0.0 and r <= hm and c >= 0.0 and c <= wm):
                 out[i, j] = np.nan
                 continue
             r0 = min(int(r), h - 2) if h > 1 else 0
@@ -1046,10 +1048,15 @@ def clean_stations(mid, contrast, spx, spy, nx, ny, x0, y0, dirx, diry, nrmx, nr
         dev = np.empty(n)
         devu = np.empty(n_use)
         c = 0
-        for i in range(n):  # ndi.median_filter(filled, win, mode="nearest")
+        for i in range(n):  # ndi.median_filter(filled, win, mode="nearest"), win odd: insertion-sorted window
             for q in range(win):
-                buf[q] = filled[min(max(i + q - h, 0), n - 1)]
-            dev[i] = abs(mid[i] - np.median(buf))
+                v = filled[min(max(i + q - h, 0), n - 1)]
+                p = q
+                while p > 0 and buf[p - 1] > v:
+                    buf[p] = buf[p - 1]
+                    p -= 1
+                buf[p] = v
+            dev[i] = abs(mid[i] - buf[h])
             if use[i]:
                 devu[c] = dev[i]
                 c += 1
