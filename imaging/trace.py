@@ -67,6 +67,7 @@ from osmobulge.imaging._kernels import (
     lsq_spline,
     rim_bridge,
     robust_profile_spline,
+    sample_transects,
     strongest_edge,
 )
 from osmobulge.imaging._normals import resample_polyline, viterbi_path
@@ -76,6 +77,8 @@ __all__ = ["TraceSettings", "FrameTrace", "ChamberTracer", "FLAGS", "trace_serie
 
 #: quality flags, in order of precedence
 FLAGS = ("ok", "no_membrane", "delaminated", "fractured", "touching", "poor_fit")
+
+_AT_POINT = np.zeros(1)  # a transect of one sample: bilinear samples at the points themselves
 
 
 @dataclass(frozen=True)
@@ -849,7 +852,8 @@ class ChamberTracer:
         uz = [(u_, np.full(len(u_), z_)) for sgn, far in zip((-1.0, 1.0), self._rim_contact_u, strict=True)
               for u_, z_ in ((sgn * uu, 0.0), (far, 0.0), (far, zw))]
         pts = g.line.point(np.concatenate([q[0] for q in uz]), np.concatenate([q[1] for q in uz]))
-        v = np.split(view.sample(pts[:, 0], pts[:, 1]), np.cumsum([len(q[0]) for q in uz])[:-1])
+        v = np.split(sample_transects(view.frame, view.k, pts, np.zeros_like(pts), _AT_POINT)[:, 0],
+                     np.cumsum([len(q[0]) for q in uz])[:-1])
         for k in (0, 3):
             band, band_far, water = (_nanmedian(x) for x in v[k:k + 3])
             den = water - band_far
