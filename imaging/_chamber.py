@@ -25,6 +25,7 @@ from scipy.stats import siegelslopes
 
 from osmobulge.imaging._kernels import (
     band_edges_rows,
+    dusty_rows,
     fill_rows_nanmedian,
     nanmedian,
     robust_line,
@@ -395,35 +396,86 @@ def measure_line(view, line, u, *, polarity, thickness, window):
     return new, _nanmedian(width[inl]), _nanmedian(con[inl]), rms, inl
 
 
+def _dusty_rows(prof, offs, pos, *, gap=2.0, clip=3.0):
+    """Rows of a wall whose grey level on either side of the edge is darker than the wall's trend (dust).
+
+    A speck on or beside a wall bends the mid-level crossing of every row it
+    covers, by up to a few px while the step stays strong: its shadow falls on
+    the side levels (the end samples set the crossing level) or on the edge
+    itself.  Either way the mean level of that side, more than ``gap`` px from
+    the edge, drops below the level the clean rows share.  Dust only absorbs
+    light, so the clean level is the *upper* trend over the rows; a speck can
+    cover more than half the rows of a short wall (and, covering one end,
+    looks like a slope to a symmetric fit), so each side's trend starts from a
+    constant at its upper quartile and is refitted (twice) as a line on the
+    rows from ``clip`` noise sigmas below to ``2 clip`` above it only.  The
+    noise sigma comes from differences of neighbouring rows (a speck is smooth
+    along the wall and drops out of them).  Compiled
+    (:func:`~osmobulge.imaging._kernels.dusty_rows`): it runs for both walls of
+    every frame.
+
+    Parameters
+    ----------
+    prof : ndarray of shape (N, K)
+        Transects across the wall, one per row (nan outside the view).
+    offs : ndarray of shape (K,)
+        Their sample offsets (px).
+    pos : ndarray of shape (N,)
+        Edge offset per row (nan: row not used).
+
+    Returns
+    -------
+    dusty, grown : ndarray of bool, shape (N,)
+        True for rows darkened on either side (and rows without a level);
+        ``grown``: each run of them grown by half its length on both ends (a
+        speck's fringe, too faint to detect row by row, still bends the
+        crossings).
+    """
+    return dusty_rows(np.ascontiguousarray(prof, np.float64), np.ascontiguousarray(offs, np.float64),
+                              np.ascontiguousarray(pos, np.float64), float(gap), float(clip))
+
+
 def measure_walls(view, line, well, *, thickness, window, n_rows=None):
     """Sub-pixel wall lines of a well; returns the refined :class:`Well` and the wall RMS (px).
 
-    The walls are measured on rows (one per pixel by default) between 12 % and
-    80 % of the well depth below the base's top surface (``z = -thickness / 2``),
-    fitted with clipped least squares (dust on a wall only removes rows: so do
-    rows whose step is weaker than half the median or of the other sign), once
-    more centred on the first fit when that was poor (RMS > 0.5 px), starting
-    from a repeated-median line (:func:`scipy.stats.siegelslopes`; the better
-    of the two fits is kept), and extrapolated to that surface: the wall tops
-    are the rim.
+    The walls are measured on rows (one per pixel by default) between 6 % and
+    92 % of the well depth below the base's top surface (``z = -thickness / 2``;
+    the longer the run of rows, the less the extrapolation to the rim amplifies
+    their noise), fitted with clipped least squares (dust on a wall only
+    removes rows: so do rows whose step is weaker than half the median or of
+    the other sign, and rows a speck darkens on either side, see
+    :func:`_dusty_rows`), once more centred on the first fit when that was poor
+    (RMS > 0.5 px), starting from a repeated-median line
+    (:func:`scipy.stats.siegelslopes`; the better of the two fits is kept), and
+    extrapolated to that surface: the wall tops are the rim.  A wall left with
+    a much shorter spread of rows than the other takes the other's slope,
+    mirrored, into its own (weighted by the spread).
     """
     top = -0.5 * thickness
     depth = well.depth if np.isfinite(well.depth) else 4.0 * thickness
     if n_rows is None:
-        n_rows = int(np.clip(0.68 * depth, 8, 200))
-    zs = top - np.linspace(0.12, 0.8, n_rows) * depth
+        n_rows = int(np.clip(0.86 * depth, 8, 250))
+    zs = top - np.linspace(0.06, 0.92, n_rows) * depth
     out = {}
     rms_all = []
     offs = np.arange(-window, window + 1e-9, 0.5)
     d = np.broadcast_to(line.direction, (len(zs), 2))
+    rows = {}  # name -> (zz, uu) of the rows behind the kept fit (inliers only)
     for name, u0, slope in (("left", well.u_left, well.slope_left), ("right", well.u_right, well.slope_right)):
-        first = (np.nan, np.nan, np.inf)  # (a, b, rms) of the first fit
+        first = (np.nan, np.nan, np.inf, None)  # (a, b, rms, rows) of the first fit
         for attempt in range(2):
             uc = u0 + slope * (zs - top)
-            pos, step = step_crossing(view.transects(line.point(uc, zs), d, offs), offs)
+            prof = view.transects(line.point(uc, zs), d, offs)
+            pos, step = step_crossing(prof, offs)
             # rows whose step is not the wall's (dust on the wall, a speck in a side window) are not used
             med = _nanmedian(step)
             pos = np.where((np.sign(step) == np.sign(med)) & (np.abs(step) > 0.5 * abs(med)), pos, np.nan)
+            # nor rows a speck darkens on either side (it bends their crossings by up to a few px while
+            # their step stays strong), unless that would leave too few rows (then the clipped fits decide)
+            for dusty in _dusty_rows(prof, offs, pos)[::-1]:
+                if (~dusty).sum() >= max(6, 0.3 * len(zs)):
+                    pos = np.where(dusty, np.nan, pos)
+                    break
             zz, uu = zs - top, uc + pos
             if attempt:
                 # a poor first fit (dust over part of the wall): start from the repeated-median line
@@ -436,18 +488,30 @@ def measure_walls(view, line, well, *, thickness, window, n_rows=None):
                     uu = np.where(np.abs(res) <= max(3.0 * mad, 0.5), uu, np.nan)
             a, b, rms, ok = _robust_line(zz, uu, clip=2.5)
             good = np.isfinite(a) and ok.sum() >= 3
+            used = (zz[ok], uu[ok])
             if attempt:  # keep the better of the two fits
                 if not good or not rms < first[2]:
-                    a, b, rms = first
+                    a, b, rms, used = first
                 break
             if not good:
                 return None, np.nan
             if rms <= 0.5:
                 break
-            first = (a, b, rms)
+            first = (a, b, rms, used)
             u0, slope = a, b  # a poor fit from a rough start: once more, centred on it, robustly
         out[name] = (a, b)
+        rows[name] = used
         rms_all.append(rms)
+    # a wall that lost most of its rows to dust (or kept a short run of them) has a poorly known slope, and
+    # its extrapolation to the rim with it is worse still: the walls lean out alike (mirror images about the
+    # axis: the rim widens with the pre-stretch), so that wall's slope is combined with the other's mirrored,
+    # weighted by the spread of the rows behind each (inverse variance for equal row noise)
+    szz = {k: float(np.sum((zr - zr.mean()) ** 2)) if len(zr) else 0.0 for k, (zr, _) in rows.items()}
+    weak, strong = sorted(szz, key=szz.get)
+    if szz[weak] < 0.5 * szz[strong] and len(rows[weak][0]) >= 3:
+        zr, ur = rows[weak]
+        b = (szz[weak] * out[weak][1] - szz[strong] * out[strong][1]) / (szz[weak] + szz[strong])
+        out[weak] = (float(np.mean(ur) - b * np.mean(zr)), b)
     return replace(well, u_left=float(out["left"][0]), slope_left=float(out["left"][1]),
                    u_right=float(out["right"][0]), slope_right=float(out["right"][1])), float(np.max(rms_all))
 

@@ -20,7 +20,7 @@ __all__ = ["sample_transects", "smoothed_transects", "ends_noise", "band_edges_r
            "ellipse_distance_folded", "robust_profile_spline", "strongest_edge", "native_frame",
            "guide_transects", "revolution_halves", "clean_stations", "rim_bridge",
            "abs_percentile", "ellipse_scatter", "ellipse_arc_volume",
-           "direct_ellipse"]
+           "direct_ellipse", "dusty_rows"]
 
 
 @njit(cache=True, nogil=True)
@@ -1290,3 +1290,108 @@ def direct_ellipse(x, y):
         elif out[i] == -np.inf:
             out[i] = -1.7976931348623157e308
     return 0, (out[0] * scale + x0, out[1] * scale + y0, out[2] * scale, out[3] * scale, out[4])
+
+
+@njit(cache=True, nogil=True)
+def _upper_trend_ok(y, ok, clip, refits):
+    """Rows of ``y`` within -clip .. +2 clip noise sigmas of its upper linear trend over the row index (in ``ok``).
+
+    The numpy it replaces: ``sig = 1.4826 / sqrt(2) * median(|diff(y_finite)|)``,
+    a constant trend at the upper quartile of ``y``, then ``refits`` least
+    squares lines on the rows in the window about the last trend.
+    """
+    n = y.shape[0]
+    fy = np.empty(n)
+    m = 0
+    for i in range(n):
+        if np.isfinite(y[i]):
+            fy[m] = y[i]
+            m += 1
+        ok[i] = False
+    if m < 8:
+        return False
+    d = np.empty(m - 1)
+    for i in range(m - 1):
+        d[i] = abs(fy[i + 1] - fy[i])
+    srt = np.sort(fy[:m])
+    sig = max(1.4826 / np.sqrt(2.0) * np.median(d), 1e-3 * abs(srt[m - 1]), 1e-12)
+    a = srt[(3 * (m - 1)) // 4]
+    b = 0.0
+    for it in range(refits + 1):
+        c = 0
+        sx = 0.0
+        sy = 0.0
+        for i in range(n):
+            r = y[i] - (a + b * i)
+            ok[i] = np.isfinite(r) and -clip * sig < r < 2.0 * clip * sig
+            if ok[i]:
+                c += 1
+                sx += i
+                sy += y[i]
+        if it == refits or c < 4:
+            break
+        xm = sx / c
+        ym = sy / c
+        sxx = 0.0
+        sxy = 0.0
+        for i in range(n):
+            if ok[i]:
+                sxx += (i - xm) * (i - xm)
+                sxy += (i - xm) * (y[i] - ym)
+        b = sxy / sxx if sxx > 0 else 0.0
+        a = ym - b * xm
+    return True
+
+
+@njit(cache=True, nogil=True)
+def dusty_rows(prof, offs, pos, gap, clip):
+    """Rows darkened by dust on either side of a wall's edge, and those runs grown by half their length.
+
+    See :func:`osmobulge.imaging._chamber._dusty_rows`.
+    """
+    n, k = prof.shape
+    lev = np.empty((2, n))
+    for i in range(n):
+        s0 = 0.0
+        s1 = 0.0
+        c0 = 0
+        c1 = 0
+        if np.isfinite(pos[i]):
+            for j in range(k):
+                v = prof[i, j]
+                if not np.isfinite(v):
+                    continue
+                r = offs[j] - pos[i]
+                if r < -gap:
+                    s0 += v
+                    c0 += 1
+                elif r > gap:
+                    s1 += v
+                    c1 += 1
+        lev[0, i] = s0 / c0 if c0 else np.nan
+        lev[1, i] = s1 / c1 if c1 else np.nan
+    dusty = np.zeros(n, np.bool_)
+    ok = np.empty(n, np.bool_)
+    for side in range(2):
+        if not _upper_trend_ok(lev[side], ok, clip, 2):
+            for i in range(n):
+                dusty[i] |= not np.isfinite(lev[side, i])
+            continue
+        for i in range(n):
+            dusty[i] |= not ok[i]
+    # a speck's shadow fades out smoothly: beyond the rows where it is detected its fringe still bends
+    # the crossings (most where it sits on the edge), so each run of dusty rows grows by half its length
+    grown = dusty.copy()
+    i = 0
+    while i < n:
+        if not dusty[i]:
+            i += 1
+            continue
+        j = i
+        while j < n and dusty[j]:
+            j += 1
+        g = (j - i + 1) // 2
+        for r in range(max(i - g, 0), min(j + g, n)):
+            grown[r] = True
+        i = j
+    return dusty, grown
