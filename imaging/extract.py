@@ -287,10 +287,11 @@ def extract(
         bar = Progress(transient=True)
         task = bar.add_task("extracting", total=n)
         bar.start()
+    read = getattr(src, "peek", src.__getitem__)  # no copy of a memory-mapped frame: its pages are read on use
     try:
         for i in range(n):
             try:
-                frame = first if i == 0 else src[i]
+                frame = first if i == 0 else read(i)
             except Exception as err:  # noqa: BLE001 - an unreadable frame is flagged in every chamber
                 if errors == "raise":
                     raise

@@ -477,14 +477,14 @@ class _TiffBackend:
             times = np.asarray(times, float)[self.good]
         return px, times, res
 
-    def read(self, i):
+    def read(self, i, copy=True):
         k = self.good[i]
         pi = self.page_index[k]
         try:
             if self._contiguous is not None:
-                a = np.array(self._contiguous[pi])
+                a = np.array(self._contiguous[pi], copy=copy)
             elif self._memmap is not None:
-                a = np.array(self._memmap[pi])
+                a = np.array(self._memmap[pi], copy=copy)
             else:
                 pg = self.pages[pi]
                 a = pg.asarray()
@@ -836,9 +836,25 @@ class FrameSeries(Sequence):
         n = len(self)
         if not -n <= k < n:
             raise IndexError(f"frame index {k} out of range for a series of {n} frames")
+        return self._read(k, True)
+
+    def peek(self, i):
+        """Frame ``i`` like ``series[i]``, but without a copy where the file is memory-mapped.
+
+        An uncompressed TIFF's frame is then a read-only view of the mapped file:
+        only the pages a caller touches are read (the extraction samples a few
+        percent of each frame), and it is valid only while the series is open.
+        Other sources return their copy as ``series[i]`` does.
+        """
+        k = int(i)
+        if not -len(self) <= k < len(self):
+            raise IndexError(f"frame index {k} out of range for a series of {len(self)} frames")
+        return self._read(k, False)
+
+    def _read(self, k, copy):
         j = int(self._index[k])
         try:
-            return self._b.read(j)
+            return self._b.read(j, copy=False) if not copy and isinstance(self._b, _TiffBackend) else self._b.read(j)
         except FrameReadError as err:
             entry = (self._b.names[j], str(err))
             if entry not in self._b.bad:

@@ -65,6 +65,7 @@ from osmobulge.imaging._kernels import (
     guide_transects,
     longest_run,
     lsq_spline,
+    native_frame,
     rim_bridge,
     robust_profile_spline,
     sample_transects,
@@ -985,7 +986,7 @@ class ChamberTracer:
         -------
         FrameTrace
         """
-        frame = np.asarray(frame)
+        frame = native_frame(np.asarray(frame))  # once here, not in every kernel (big-endian files, bool masks)
         if frame.shape != self.shape:
             raise ValueError(f"frame {index} has shape {frame.shape}, expected {self.shape}")
         view = FrameView(frame, self.k)

@@ -63,6 +63,20 @@ def test_round_trip_16_bit(tmp_path, frames16, fmt):
         assert s.names[0].startswith("frame")
 
 
+@pytest.mark.parametrize("fmt", ["tiff", "ome-tiff", "tiff-folder", "png"])
+def test_peek_is_the_frame_without_a_copy_where_memory_mapped(tmp_path, frames16, fmt):
+    path = write_series(frames16, tmp_path / fmt, fmt=fmt, pixel_size=PX, timestamps=60.0 * np.arange(5))
+    with open_series(path) as s:
+        for i in (0, 3, -1):
+            view = s.peek(i)
+            np.testing.assert_array_equal(view, s[i])
+            if fmt in ("tiff", "ome-tiff"):  # uncompressed, contiguous: a read-only view of the mapped file
+                assert not view.flags.owndata and not view.flags.writeable
+                assert s[i].flags.owndata  # while series[i] is a copy
+        with pytest.raises(IndexError):
+            s.peek(5)
+
+
 def test_jpeg_round_trip_is_close(tmp_path, frames8):
     smooth = np.repeat(np.repeat(np.linspace(20, 230, 5 * 6 * 8).reshape(5, 6, 8), 4, axis=1), 4, axis=2)
     smooth = smooth.astype(np.uint8)
