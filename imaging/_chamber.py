@@ -25,9 +25,12 @@ from scipy.stats import siegelslopes
 
 from osmobulge.imaging._kernels import (
     band_edges_rows,
+    block_mean,
     dusty_rows,
     fill_rows_nanmedian,
     nanmedian,
+    native_frame,
+    ridge_rows,
     robust_line,
     sample_transects,
     step_crossing_rows,
@@ -269,26 +272,20 @@ def _robust_line(x, y, *, iters=4, clip=3.0, floor=0.1):
 
 # ---------------------------------------------------------------------------------- orientation
 def _ridge_rows(img, w_max=8):
-    """Per column: row and signed value of the strongest ridge (band) response over widths 1..w_max."""
-    best = np.zeros(img.shape, np.float32)
-    for w in range(1, w_max + 1):
-        up = np.roll(img, w, axis=0)
-        dn = np.roll(img, -w, axis=0)
-        r = 0.5 * (up + dn) - img  # > 0 for a dark ridge
-        r[:w] = 0
-        r[-w:] = 0
-        # a step gives |r| = step/2 on one side only; require both sides to agree in sign
-        both = np.sign(up - img) == np.sign(dn - img)
-        r = np.where(both, r, 0)
-        best = np.where(np.abs(r) > np.abs(best), r, best)
-    rows = np.argmax(np.abs(best), axis=0)
-    return rows, best[rows, np.arange(img.shape[1])]
+    """Per column: row and signed value of the strongest ridge (band) response over widths 1..w_max.
+
+    For each width ``w``, ``(up + dn) / 2 - img`` with the pixels ``w`` rows
+    above and below (> 0 for a dark ridge), where both differ from the pixel
+    with the same sign (a step gives a response on one side only), 0 within
+    ``w`` rows of the ends; the strongest over the widths, then over the rows.
+    Compiled (:func:`~osmobulge.imaging._kernels.ridge_rows`, float32 as here).
+    """
+    return ridge_rows(np.ascontiguousarray(img, np.float32), int(w_max))
 
 
 def _coarse(frame, f):
-    h, w = frame.shape
-    h2, w2 = h // f * f, w // f * f
-    return np.asarray(frame[:h2, :w2], np.float32).reshape(h2 // f, f, w2 // f, f).mean(axis=(1, 3))
+    """The frame averaged over f x f blocks (float32; a partial last block row or column dropped)."""
+    return block_mean(native_frame(np.ascontiguousarray(frame)), int(f))
 
 
 def detect_orientation(frame):

@@ -20,7 +20,7 @@ __all__ = ["sample_transects", "smoothed_transects", "ends_noise", "band_edges_r
            "ellipse_distance_folded", "robust_profile_spline", "strongest_edge", "native_frame",
            "guide_transects", "revolution_halves", "clean_stations", "rim_bridge",
            "abs_percentile", "ellipse_scatter", "ellipse_arc_volume",
-           "direct_ellipse", "dusty_rows"]
+           "direct_ellipse", "dusty_rows", "ridge_rows", "block_mean"]
 
 
 @njit(cache=True, nogil=True)
@@ -1395,3 +1395,57 @@ def dusty_rows(prof, offs, pos, gap, clip):
             grown[r] = True
         i = j
     return dusty, grown
+
+
+@njit(cache=True, nogil=True)
+def ridge_rows(img, w_max):
+    """Per column: row and signed value of the strongest ridge (band) response over widths 1..w_max.
+
+    :func:`osmobulge.imaging._chamber._ridge_rows` (the ``np.roll`` form) in
+    one pass, in the image's float32: ``r = (up + dn) / 2 - img`` with ``up``,
+    ``dn`` the pixels ``w`` rows above and below, kept where both differ from
+    the pixel with the same sign, 0 within ``w`` rows of the ends.
+    """
+    h, w = img.shape
+    half = np.float32(0.5)
+    rows = np.zeros(w, np.int64)
+    vals = np.zeros(w, np.float32)
+    top_abs = np.full(w, np.float32(-1.0))
+    for i in range(h):  # row by row (contiguous), the best per column kept
+        kmax = min(w_max, i, h - 1 - i)
+        for j in range(w):
+            best = np.float32(0.0)
+            x = img[i, j]
+            for k in range(1, kmax + 1):
+                du = img[i - k, j] - x
+                dd = img[i + k, j] - x
+                if (du > 0) != (dd > 0) or (du < 0) != (dd < 0):  # np.sign(du) != np.sign(dd)
+                    continue
+                r = half * (img[i - k, j] + img[i + k, j]) - x
+                if abs(r) > abs(best):
+                    best = r
+            if abs(best) > top_abs[j]:
+                top_abs[j] = abs(best)
+                vals[j] = best
+                rows[j] = i
+    return rows, vals
+
+
+@njit(cache=True, nogil=True)
+def block_mean(frame, f):
+    """``frame[:h // f * f, :w // f * f]`` averaged over f x f blocks, as float32 (sums in float64)."""
+    h, w = frame.shape[0] // f, frame.shape[1] // f
+    out = np.zeros((h, w), np.float32)
+    acc = np.zeros(w)
+    inv = 1.0 / (f * f)
+    for bi in range(h):
+        acc[:] = 0.0
+        for r in range(bi * f, bi * f + f):
+            for bj in range(w):
+                s = 0.0
+                for c in range(bj * f, bj * f + f):
+                    s += frame[r, c]
+                acc[bj] += s
+        for bj in range(w):
+            out[bi, bj] = acc[bj] * inv
+    return out

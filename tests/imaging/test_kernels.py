@@ -567,3 +567,46 @@ def test_ellipse_arc_volume_equals_numpy_reference(seed):
         assert (np.isnan(want) and np.isnan(got)) or got == pytest.approx(want, rel=1e-12)
     half = EllipseFit(center=(0.0, 0.0), semi_axes=(100.0, 60.0), angle=0.0)
     assert _ellipse_volume(half) == pytest.approx(2 / 3 * np.pi * 100**2 * 60, rel=2e-5)
+
+
+def _ref_ridge_rows(img, w_max=8):
+    """The former numpy ``_chamber._ridge_rows``."""
+    best = np.zeros(img.shape, np.float32)
+    for w in range(1, w_max + 1):
+        up = np.roll(img, w, axis=0)
+        dn = np.roll(img, -w, axis=0)
+        r = 0.5 * (up + dn) - img
+        r[:w] = 0
+        r[-w:] = 0
+        both = np.sign(up - img) == np.sign(dn - img)
+        r = np.where(both, r, 0)
+        best = np.where(np.abs(r) > np.abs(best), r, best)
+    rows = np.argmax(np.abs(best), axis=0)
+    return rows, best[rows, np.arange(img.shape[1])]
+
+
+@pytest.mark.parametrize("shape", [(256, 256), (100, 37), (10, 5), (3, 4)])
+def test_ridge_rows_equals_numpy_reference(shape):
+    from osmobulge.imaging._chamber import _ridge_rows
+
+    rng = np.random.default_rng(shape[0])
+    img = ndi.gaussian_filter(rng.random(shape).astype(np.float32) * 1000, 1.0)
+    img[shape[0] // 2: shape[0] // 2 + 3] -= 300  # a dark band
+    img[:, 0] = 5.0  # a flat column: no ridge anywhere (row 0, value 0)
+    want, got = _ref_ridge_rows(img), _ridge_rows(img)
+    np.testing.assert_array_equal(got[0], want[0])
+    np.testing.assert_array_equal(got[1], want[1])
+
+
+@pytest.mark.parametrize(("dtype", "f"), [(np.uint16, 4), (np.uint8, 3), (np.float64, 1), (bool, 2)])
+def test_block_mean_equals_numpy(dtype, f):
+    from osmobulge.imaging._chamber import _coarse
+
+    rng = np.random.default_rng(f)
+    frame = (rng.random((103, 77)) * 60000).astype(dtype)
+    h2, w2 = 103 // f * f, 77 // f * f
+    want = np.asarray(frame[:h2, :w2], np.float32).reshape(h2 // f, f, w2 // f, f).mean(axis=(1, 3))
+    got = _coarse(frame, f)
+    assert got.dtype == np.float32 and got.shape == want.shape
+    np.testing.assert_allclose(got, want, rtol=1e-6)
+    np.testing.assert_allclose(_coarse(np.rot90(frame), f), _coarse(np.ascontiguousarray(np.rot90(frame)), f))
