@@ -27,12 +27,12 @@ from osmobulge.imaging._kernels import (
     band_edges_rows,
     block_mean,
     dusty_rows,
-    fill_rows_nanmedian,
     nanmedian,
     native_frame,
     ridge_rows,
     robust_line,
     sample_transects,
+    signed_profiles,
     step_crossing_rows,
 )
 
@@ -231,10 +231,9 @@ def band_edges(profiles, offsets, polarity, *, centre=None, search=None, side=4)
         contrast over the mean side level, and band width (px); nan when an
         edge is not found.
     """
-    q = polarity * -np.asarray(profiles, float)
+    # the band high; each row's non-finite samples -> the median of its finite ones (0 if none)
+    q = signed_profiles(np.ascontiguousarray(profiles, np.float64), float(polarity))
     n, k = q.shape
-    if not np.all(np.isfinite(q)):
-        q = fill_rows_nanmedian(np.array(q, np.float64))  # each row's median of its finite samples (0 if none)
     if centre is None:
         c, s = np.zeros(n, np.int64), k
     else:

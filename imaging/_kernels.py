@@ -20,7 +20,8 @@ __all__ = ["sample_transects", "smoothed_transects", "ends_noise", "band_edges_r
            "ellipse_distance_folded", "robust_profile_spline", "strongest_edge", "native_frame",
            "guide_transects", "revolution_halves", "clean_stations", "rim_bridge",
            "abs_percentile", "ellipse_scatter", "ellipse_arc_volume",
-           "direct_ellipse", "dusty_rows", "ridge_rows", "block_mean"]
+           "direct_ellipse", "dusty_rows", "ridge_rows", "block_mean",
+           "signed_profiles"]
 
 
 @njit(cache=True, nogil=True)
@@ -1449,3 +1450,20 @@ def block_mean(frame, f):
         for bj in range(w):
             out[bi, bj] = acc[bj] * inv
     return out
+
+
+@njit(cache=True, nogil=True)
+def signed_profiles(prof, polarity):
+    """``polarity * -prof`` (the band high), each row's non-finite samples -> its finite median (0 if none)."""
+    n, k = prof.shape
+    q = np.empty((n, k))
+    bad = False
+    for i in range(n):
+        for j in range(k):
+            q[i, j] = -polarity * prof[i, j]
+            if not np.isfinite(q[i, j]):
+                bad = True
+    if bad:
+        fill_rows_nanmedian(q)
+    return q
+
