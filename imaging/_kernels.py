@@ -20,7 +20,7 @@ __all__ = ["sample_transects", "smoothed_transects", "ends_noise", "band_edges_r
            "ellipse_distance_folded", "robust_profile_spline", "strongest_edge", "native_frame",
            "guide_transects", "revolution_halves", "clean_stations", "rim_bridge",
            "abs_percentile", "ellipse_scatter", "ellipse_arc_volume",
-           "direct_ellipse", "dusty_rows", "ridge_rows", "block_mean",
+           "dusty_rows", "ridge_rows", "block_mean",
            "signed_profiles"]
 
 
@@ -1236,61 +1236,6 @@ def ellipse_arc_volume(xc, yc, a, b, theta, n):
         return np.nan
     return 0.5 * (meas[0] + meas[1])
 
-
-@njit(cache=True, nogil=True, error_model="numpy")
-def direct_ellipse(x, y):
-    """Halir & Flusser's direct least-squares ellipse, compiled (skimage's ``EllipseModel`` estimate).
-
-    Returns ``status, (xc, yc, width, height, phi)``: status 0 ok, 1 no
-    ellipse (degenerate points, or not exactly one eigenvector meets the
-    constraint ``4ac - b^2 > 0``).  Raises (numba) when an eigenvalue is
-    complex: the caller then uses numpy's complex eigensolver.
-    """
-    x0, y0, scale, S1, S2, S3 = ellipse_scatter(x, y)
-    if not scale >= 2.2250738585072014e-308:
-        return 1, (np.nan, np.nan, np.nan, np.nan, np.nan)
-    T = -np.linalg.solve(S3, np.ascontiguousarray(S2.T))
-    Mr = S1 + S2 @ T
-    M = np.empty((3, 3))
-    M[0] = Mr[2] / 2.0  # inv(C1) @ Mr with C1 = [[0, 0, 2], [0, -1, 0], [2, 0, 0]]
-    M[1] = -Mr[1]
-    M[2] = Mr[0] / 2.0
-    _, vecs = np.linalg.eig(M)
-    pick = -1
-    for j in range(3):
-        if 4.0 * vecs[0, j] * vecs[2, j] - vecs[1, j] ** 2 > 0:
-            if pick >= 0:
-                return 1, (np.nan, np.nan, np.nan, np.nan, np.nan)
-            pick = j
-    if pick < 0:
-        return 1, (np.nan, np.nan, np.nan, np.nan, np.nan)
-    a1 = np.ascontiguousarray(vecs[:, pick])
-    a, b, c = a1[0], a1[1], a1[2]
-    a2 = T @ a1
-    d_, f, g = a2[0], a2[1], a2[2]
-    b, d_, f = b / 2.0, d_ / 2.0, f / 2.0
-    den = b * b - a * c
-    xc, yc = (c * d_ - b * f) / den, (a * f - b * d_) / den
-    num = a * f * f + c * d_ * d_ + g * b * b - 2.0 * b * d_ * f - a * c * g
-    term = np.sqrt((a - c) ** 2 + 4.0 * b * b)
-    width = np.sqrt(2.0 * num / (den * (term - (a + c))))
-    height = np.sqrt(2.0 * num / (den * (-term - (a + c))))
-    phi = 0.5 * np.arctan((2.0 * b) / (a - c))
-    if a > c:
-        phi += 0.5 * np.pi
-    if width < height:
-        width, height = height, width
-        phi += np.pi / 2
-    phi = phi % np.pi
-    out = np.array([xc, yc, width, height, phi])
-    for i in range(5):  # np.nan_to_num
-        if np.isnan(out[i]):
-            out[i] = 0.0
-        elif out[i] == np.inf:
-            out[i] = 1.7976931348623157e308
-        elif out[i] == -np.inf:
-            out[i] = -1.7976931348623157e308
-    return 0, (out[0] * scale + x0, out[1] * scale + y0, out[2] * scale, out[3] * scale, out[4])
 
 
 @njit(cache=True, nogil=True)

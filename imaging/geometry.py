@@ -27,8 +27,12 @@ import numpy as np
 from scipy import interpolate
 from skimage import measure
 
-from osmobulge.imaging._kernels import (direct_ellipse, ellipse_distance_folded, ellipse_scatter, lsq_spline,
-                                        revolution_halves)
+from osmobulge.imaging._kernels import (
+    ellipse_distance_folded,
+    ellipse_scatter,
+    lsq_spline,
+    revolution_halves,
+)
 
 __all__ = [
     "EllipseFit",
@@ -163,21 +167,9 @@ def _direct_ellipse(pts):
     1e-9 against skimage in the tests) without the model-object overhead,
     which cost about 0.3 ms a fit: the extraction fits one per frame.  None
     when no ellipse satisfies the constraint (or the points are degenerate).
-    Compiled (:func:`~osmobulge.imaging._kernels.direct_ellipse`); numpy's
-    complex eigensolver when the compiled real one meets a complex eigenvalue.
+    The scatter sums are compiled; the 3 x 3 algebra stays in numpy (numba's
+    eigensolver takes about 10 s to compile and would gain 0.08 ms a frame).
     """
-    x, y = np.ascontiguousarray(pts[:, 0], np.float64), np.ascontiguousarray(pts[:, 1], np.float64)
-    try:
-        status, (xc, yc, width, height, phi) = direct_ellipse(x, y)
-    except (ValueError, np.linalg.LinAlgError):
-        return _direct_ellipse_np(pts)
-    if status:
-        return None
-    return _Conic(np.array([xc, yc]), np.array([width, height]), float(phi))
-
-
-def _direct_ellipse_np(pts):
-    """:func:`_direct_ellipse` in numpy (complex eigenvalues allowed, real parts used as skimage does)."""
     x0, y0, scale, S1, S2, S3 = ellipse_scatter(np.ascontiguousarray(pts[:, 0]), np.ascontiguousarray(pts[:, 1]))
     if not scale >= np.finfo(float).tiny:
         return None

@@ -184,7 +184,7 @@ def test_direct_ellipse_is_skimages_estimate(seed):
     """The fast direct fit gives skimage's EllipseModel parameters (noisy arcs, whole ellipses, domes)."""
     from skimage.measure import EllipseModel
 
-    from osmobulge.imaging.geometry import _direct_ellipse, _direct_ellipse_np
+    from osmobulge.imaging.geometry import _direct_ellipse
 
     rng = np.random.default_rng(seed)
     a, b = rng.uniform(5.0, 300.0, 2)
@@ -196,15 +196,14 @@ def test_direct_ellipse_is_skimages_estimate(seed):
     pts += rng.normal(0, 0.01 * min(a, b), pts.shape)
     ref = EllipseModel.from_estimate(pts)
     assert ref
-    for fast in (_direct_ellipse(pts), _direct_ellipse_np(pts)):  # compiled, and the numpy fallback
-        assert fast is not None
-        np.testing.assert_allclose(fast.center, ref.center, rtol=1e-9, atol=1e-9 * max(a, b))
-        np.testing.assert_allclose(fast.axis_lengths, ref.axis_lengths, rtol=1e-9)
-        assert fast.theta == pytest.approx(float(ref.theta), abs=1e-9)
+    fast = _direct_ellipse(pts)
+    assert fast is not None
+    np.testing.assert_allclose(fast.center, ref.center, rtol=1e-9, atol=1e-9 * max(a, b))
+    np.testing.assert_allclose(fast.axis_lengths, ref.axis_lengths, rtol=1e-9)
+    assert fast.theta == pytest.approx(float(ref.theta), abs=1e-9)
     # degenerate input: no ellipse from either
     line = np.c_[np.arange(10.0), 2 * np.arange(10.0)]
     assert _direct_ellipse(line) is None or not EllipseModel.from_estimate(line)
-    assert _direct_ellipse_np(line) is None or not EllipseModel.from_estimate(line)
 
 
 def test_robust_ellipse_fit_rejects_outliers():
