@@ -469,7 +469,8 @@ def measure_walls(view, line, well, *, thickness, window, n_rows=None):
             # nor rows a speck darkens on either side (it bends their crossings by up to a few px while
             # their step stays strong), unless that would leave too few rows (then the clipped fits decide)
             for dusty in _dusty_rows(prof, offs, pos)[::-1]:
-                if (~dusty).sum() >= max(6, 0.3 * len(zs)):
+                kept = ~dusty & np.isfinite(pos)
+                if kept.sum() >= 6 and (kept.sum() >= 0.3 * len(zs) or np.std(zs[kept]) >= 0.5 * np.std(zs)):
                     pos = np.where(dusty, np.nan, pos)
                     break
             zz, uu = zs - top, uc + pos
