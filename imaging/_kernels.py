@@ -208,6 +208,35 @@ def viterbi_rows(sc, m, penalty):
 
 
 @njit(cache=True, nogil=True)
+def _span(t, k, n, x):
+    """Knot span l, k <= l <= n - 1, with t[l] <= x < t[l + 1] (the last point in the last span)."""
+    lo, hi = k, n
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        if t[mid] <= x:
+            lo = mid
+        else:
+            hi = mid
+    return lo
+
+
+@njit(cache=True, nogil=True)
+def _basis(t, k, l, x, b, left, right):
+    """de Boor-Cox: the k + 1 non-zero B-splines of degree k at x in span l, into ``b`` (work arrays left, right)."""
+    b[0] = 1.0
+    for j in range(1, k + 1):
+        left[j] = x - t[l + 1 - j]
+        right[j] = t[l + j] - x
+        saved = 0.0
+        for r in range(j):
+            den = right[r + 1] + left[j - r]
+            tmp = b[r] / den if den != 0.0 else 0.0
+            b[r] = saved + right[r + 1] * tmp
+            saved = left[j - r] * tmp
+        b[j] = saved
+
+
+@njit(cache=True, nogil=True)
 def _lsq_normal(x, y, t, w, ata, aty):
     """Banded normal equations of the cubic least-squares spline (weights multiply the residuals)."""
     n = ata.shape[0]
@@ -220,27 +249,10 @@ def _lsq_normal(x, y, t, w, ata, aty):
         if wi == 0.0:
             continue
         xi = x[i]
-        # span l with t[l] <= x < t[l+1], 3 <= l <= n - 1 (the last point in the last span)
-        lo, hi = 3, n
-        while hi - lo > 1:
-            mid = (lo + hi) // 2
-            if t[mid] <= xi:
-                lo = mid
-            else:
-                hi = mid
-        l = lo
-        # de Boor-Cox: the 4 non-zero cubic B-splines N_{l-3..l}(x)
-        b[0] = 1.0
-        for j in range(1, 4):
-            left[j] = xi - t[l + 1 - j]
-            right[j] = t[l + j] - xi
-            saved = 0.0
-            for r in range(j):
-                den = right[r + 1] + left[j - r]
-                tmp = b[r] / den if den != 0.0 else 0.0
-                b[r] = saved + right[r + 1] * tmp
-                saved = left[j - r] * tmp
-            b[j] = saved
+        # span l with t[l] <= x < t[l+1], 3 <= l <= n - 1 (the last point in the last span), and the 4
+        # non-zero cubic B-splines N_{l-3..l}(x)
+        l = _span(t, 3, n, xi)
+        _basis(t, 3, l, xi, b, left, right)
         for a in range(4):
             ia = l - 3 + a
             for c in range(a, 4):
@@ -431,6 +443,36 @@ def step_crossing_rows(q, offsets, side):
 
 
 @njit(cache=True, nogil=True)
+def _masked_line(x, y, ok):
+    """Least-squares line ``y = a + b x`` over the points in ``ok``: a, b and their count.
+
+    ``b`` is nan when the points have no spread in x (``a`` is then their mean y).
+    """
+    m = 0
+    sx = 0.0
+    sy = 0.0
+    for i in range(x.shape[0]):
+        if ok[i]:
+            m += 1
+            sx += x[i]
+            sy += y[i]
+    if m == 0:
+        return np.nan, np.nan, 0
+    xm = sx / m
+    ym = sy / m
+    sxx = 0.0
+    sxy = 0.0
+    for i in range(x.shape[0]):
+        if ok[i]:
+            sxx += (x[i] - xm) * (x[i] - xm)
+            sxy += (x[i] - xm) * (y[i] - ym)
+    if not sxx > 0:
+        return ym, np.nan, m
+    b = sxy / sxx
+    return ym - b * xm, b, m
+
+
+@njit(cache=True, nogil=True)
 def robust_line(x, y, iters, clip, floor):
     """Least-squares line ``y = a + b x`` with sigma clipping: the loop of ``_chamber._robust_line``.
 
@@ -445,28 +487,10 @@ def robust_line(x, y, iters, clip, floor):
     rms = np.nan
     res = np.empty(n)
     for _ in range(iters):
-        m = 0
-        sx = 0.0
-        sy = 0.0
-        for i in range(n):
-            if ok[i]:
-                m += 1
-                sx += x[i]
-                sy += y[i]
-        if m < 2:
+        a_new, b_new, m = _masked_line(x, y, ok)
+        if m < 2 or not np.isfinite(b_new):
             break
-        xm = sx / m
-        ym = sy / m
-        sxx = 0.0
-        sxy = 0.0
-        for i in range(n):
-            if ok[i]:
-                sxx += (x[i] - xm) * (x[i] - xm)
-                sxy += (x[i] - xm) * (y[i] - ym)
-        if not sxx > 0:
-            break
-        b = sxy / sxx
-        a = ym - b * xm
+        a, b = a_new, b_new
         r_ok = np.empty(m)
         c = 0
         ss = 0.0
@@ -571,19 +595,6 @@ def ellipse_distance_folded(x, y, a, b, max_iter):
 
 # ---------------------------------------------------------------------------- robust profile spline
 @njit(cache=True, nogil=True)
-def _span(t, k, n, x):
-    """Knot span l, k <= l <= n - 1, with t[l] <= x < t[l + 1] (the last point in the last span)."""
-    lo, hi = k, n
-    while hi - lo > 1:
-        mid = (lo + hi) // 2
-        if t[mid] <= x:
-            lo = mid
-        else:
-            hi = mid
-    return lo
-
-
-@njit(cache=True, nogil=True)
 def _bspl_eval(t, c, k, x, out):
     """Degree-k spline (coefficients c, shape (n, D)) at x: ``BSpline(t, c, k)(x)`` (x inside the base interval)."""
     n = c.shape[0]
@@ -594,17 +605,7 @@ def _bspl_eval(t, c, k, x, out):
     for i in range(x.shape[0]):
         xi = x[i]
         l = _span(t, k, n, xi)
-        b[0] = 1.0
-        for j in range(1, k + 1):
-            left[j] = xi - t[l + 1 - j]
-            right[j] = t[l + j] - xi
-            saved = 0.0
-            for r in range(j):
-                den = right[r + 1] + left[j - r]
-                tmp = b[r] / den if den != 0.0 else 0.0
-                b[r] = saved + right[r + 1] * tmp
-                saved = left[j - r] * tmp
-            b[j] = saved
+        _basis(t, k, l, xi, b, left, right)
         for d in range(nd):
             s = 0.0
             for a in range(k + 1):
@@ -1263,29 +1264,17 @@ def _upper_trend_ok(y, ok, clip, refits):
     sig = max(1.4826 / np.sqrt(2.0) * np.median(d), 1e-3 * abs(srt[m - 1]), 1e-12)
     a = srt[(3 * (m - 1)) // 4]
     b = 0.0
+    rows = np.arange(n).astype(np.float64)
     for it in range(refits + 1):
         c = 0
-        sx = 0.0
-        sy = 0.0
         for i in range(n):
             r = y[i] - (a + b * i)
             ok[i] = np.isfinite(r) and -clip * sig < r < 2.0 * clip * sig
-            if ok[i]:
-                c += 1
-                sx += i
-                sy += y[i]
+            c += ok[i]
         if it == refits or c < 4:
             break
-        xm = sx / c
-        ym = sy / c
-        sxx = 0.0
-        sxy = 0.0
-        for i in range(n):
-            if ok[i]:
-                sxx += (i - xm) * (i - xm)
-                sxy += (i - xm) * (y[i] - ym)
-        b = sxy / sxx if sxx > 0 else 0.0
-        a = ym - b * xm
+        a, b, _ = _masked_line(rows, y, ok)
+        b = b if np.isfinite(b) else 0.0  # no spread: the constant at the rows' mean
     return True
 
 
