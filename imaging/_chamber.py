@@ -422,13 +422,14 @@ def _dusty_rows(prof, offs, pos, *, gap=2.0, clip=3.0):
     Returns
     -------
     dusty, grown : ndarray of bool, shape (N,)
-        True for rows darkened on either side (and rows without a level);
-        ``grown``: each run of them grown by half its length on both ends (a
-        speck's fringe, too faint to detect row by row, still bends the
-        crossings).
+        True for rows darkened on either side (and rows with an edge but no
+        level to check); ``grown``: each run of darkened rows grown by half its
+        length on both ends (a speck's fringe, too faint to detect row by row,
+        still bends the crossings).  Rows without an edge are never dusty and
+        never grow.
     """
     return dusty_rows(np.ascontiguousarray(prof, np.float64), np.ascontiguousarray(offs, np.float64),
-                              np.ascontiguousarray(pos, np.float64), float(gap), float(clip))
+                      np.ascontiguousarray(pos, np.float64), float(gap), float(clip))
 
 
 def measure_walls(view, line, well, *, thickness, window, n_rows=None):

@@ -1,13 +1,20 @@
 """Compiled inner loops of the tracer (numba).
 
-Transect sampling (with the view's rotation) and smoothing along stations,
-band edges, step edges, clipped line fits, the dynamic-programming path,
-banded least-squares cubic splines, nan medians and run lengths.
+Transect sampling (with the view's rotation), the stations and normals of a
+pass with their smoothed transects, band edges, step edges, clipped line fits,
+the dynamic-programming path, banded least-squares cubic splines and the
+tracer's robust profile spline, station cleaning and rim bridges, the coarse
+wall search, dusty wall rows, the orientation's ridge filter and block means,
+solids of revolution, the ellipse's scatter sums, point distances and arc
+volume, nan medians, percentiles and run lengths.
 
-Each kernel does what a short numpy/scipy expression does (named in its
-docstring, and checked against it in ``tests/imaging/test_kernels.py``) without
-the temporary arrays and the per-call overhead that dominate a frame's tracing
-time.  Compiled on first use and cached on disk (``cache=True``).
+Each kernel does what a short numpy/scipy expression or a former numpy function
+does (named in its docstring, and checked against it in
+``tests/imaging/test_kernels.py``, or ``test_geometry.py`` for the ellipse;
+``dusty_rows`` was written compiled and has its own tests in
+``test_wall_dust.py``) without the temporary arrays and the per-call overhead
+that dominate a frame's tracing time.  Compiled on first use (about 20 s once
+per machine) and cached on disk (``cache=True``).
 """
 
 from __future__ import annotations
@@ -15,7 +22,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["sample_transects", "smoothed_transects", "ends_noise", "band_edges_rows", "step_crossing_rows",
+__all__ = ["sample_transects", "ends_noise", "band_edges_rows", "step_crossing_rows",
            "robust_line", "viterbi_rows", "lsq_spline", "fill_rows_nanmedian", "nanmedian", "longest_run",
            "ellipse_distance_folded", "robust_profile_spline", "strongest_edge", "native_frame",
            "guide_transects", "revolution_halves", "clean_stations", "rim_bridge",
@@ -372,14 +379,6 @@ def _fill_and_smooth(prof, sigma):
     return out
 
 
-def smoothed_transects(frame, k, points, directions, offsets, sigma):
-    """:func:`sample_transects`, nan filled with the median of the rest, smoothed along the stations.
-
-    ``ndi.gaussian_filter1d(where(isfinite(p), p, nanmedian(p)), sigma, axis=0, mode="nearest")``.
-    """
-    return _fill_and_smooth(sample_transects(frame, k, points, directions, offsets), float(sigma))
-
-
 @njit(cache=True, nogil=True)
 def ends_noise(prof):
     """Noise of one sample from the differences at both ends of each profile (4 samples each, as in trace)."""
@@ -562,7 +561,7 @@ def nanmedian(a):
     return float(_nanmedian_flat(np.ascontiguousarray(a, np.float64).ravel()))
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")  # a zero axis gives nan (as numpy), not ZeroDivisionError
 def ellipse_distance_folded(x, y, a, b, max_iter):
     """Distances of folded points (``x, y >= 0``, ``a >= b``) from the ellipse: Eberly's Newton in ``u = s + b^2``.
 
@@ -924,8 +923,9 @@ def guide_transects(frame, k, guide, step, offsets, sigma):
     """Stations along a guide, their normals and the smoothed transects there, in one compiled pass.
 
     ``pts, s = resample_polyline(guide, step)``; ``nrm = polyline_normals(pts,
-    smooth=2 / step)``; ``prof = smoothed_transects(frame, k, pts, nrm,
-    offsets, sigma)``.  Returns ``pts, s, nrm, prof``.
+    smooth=2 / step)``; ``prof`` the transects there, nan filled with the median
+    of the rest and smoothed along the stations (``ndi.gaussian_filter1d(...,
+    sigma, axis=0, mode="nearest")``).  Returns ``pts, s, nrm, prof``.
     """
     g = np.asarray(guide, np.float64)
     pts, s, nrm = _guide_stations(np.ascontiguousarray(g[:, 0]), np.ascontiguousarray(g[:, 1]), float(step),
@@ -1243,9 +1243,10 @@ def ellipse_arc_volume(xc, yc, a, b, theta, n):
 def _upper_trend_ok(y, ok, clip, refits):
     """Rows of ``y`` within -clip .. +2 clip noise sigmas of its upper linear trend over the row index (in ``ok``).
 
-    The numpy it replaces: ``sig = 1.4826 / sqrt(2) * median(|diff(y_finite)|)``,
-    a constant trend at the upper quartile of ``y``, then ``refits`` least
-    squares lines on the rows in the window about the last trend.
+    The noise ``sig = 1.4826 / sqrt(2) * median(|diff(y_finite)|)``, a
+    constant trend at the upper quartile of ``y``, then ``refits`` least
+    squares lines on the rows in the window about the last trend.  False
+    (and no row in ``ok``) with fewer than 8 finite values.
     """
     n = y.shape[0]
     fy = np.empty(n)
@@ -1305,25 +1306,29 @@ def dusty_rows(prof, offs, pos, gap, clip):
                     c1 += 1
         lev[0, i] = s0 / c0 if c0 else np.nan
         lev[1, i] = s1 / c1 if c1 else np.nan
-    dusty = np.zeros(n, np.bool_)
+    # detected: a finite side level below the trend; unknown: no level to check (a row without an edge, or
+    # a side outside the view) -- dusty when it has an edge, but never a seed of the growth below
+    detected = np.zeros(n, np.bool_)
+    unknown = np.zeros(n, np.bool_)
     ok = np.empty(n, np.bool_)
     for side in range(2):
-        if not _upper_trend_ok(lev[side], ok, clip, 2):
-            for i in range(n):
-                dusty[i] |= not np.isfinite(lev[side, i])
-            continue
+        trend = _upper_trend_ok(lev[side], ok, clip, 2)
         for i in range(n):
-            dusty[i] |= not ok[i]
+            if not np.isfinite(lev[side, i]):
+                unknown[i] = True
+            elif trend and not ok[i]:
+                detected[i] = True
     # a speck's shadow fades out smoothly: beyond the rows where it is detected its fringe still bends
-    # the crossings (most where it sits on the edge), so each run of dusty rows grows by half its length
+    # the crossings (most where it sits on the edge), so each run of detected rows grows by half its length
+    dusty = detected | (unknown & np.isfinite(pos))
     grown = dusty.copy()
     i = 0
     while i < n:
-        if not dusty[i]:
+        if not detected[i]:
             i += 1
             continue
         j = i
-        while j < n and dusty[j]:
+        while j < n and detected[j]:
             j += 1
         g = (j - i + 1) // 2
         for r in range(max(i - g, 0), min(j + g, n)):

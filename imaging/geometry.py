@@ -94,7 +94,7 @@ class EllipseFit:
 
 
 def ellipse_distance(points, center, semi_axes, angle, *, max_iter=60):
-    """Shortest (orthogonal) distance of points from an ellipse, exact and vectorised.
+    """Shortest (orthogonal) distance of points from an ellipse, exact (a compiled loop over the points).
 
     Parameters
     ----------
@@ -146,6 +146,12 @@ def ellipse_distance(points, center, semi_axes, angle, *, max_iter=60):
     return ellipse_distance_folded(np.ascontiguousarray(x), np.ascontiguousarray(y), a, b, int(max_iter))
 
 
+def _proper(model):
+    """Both semi-axes finite and positive (distances and areas are defined)."""
+    a, b = (float(v) for v in model.axis_lengths)
+    return bool(np.isfinite(a) and np.isfinite(b) and a > 0 and b > 0)
+
+
 def _model_distance(model, pts):
     return ellipse_distance(pts, model.center, model.axis_lengths, model.theta)
 
@@ -155,9 +161,6 @@ class _Conic:
     center: np.ndarray
     axis_lengths: np.ndarray
     theta: float
-
-    def __bool__(self):
-        return True
 
 
 def _direct_ellipse(pts):
@@ -206,6 +209,8 @@ def _direct_ellipse(pts):
         phi += np.pi / 2
     phi %= np.pi
     x0, y0, width, height, phi = np.nan_to_num([x0, y0, width, height, phi])
+    if not (np.isfinite(width * height) and width > 0 and height > 0):
+        return None  # a degenerate conic (a constraint value at rounding level: e.g. points on two lines)
     return _Conic(np.array([x0, y0]) * scale + origin, np.array([width, height]) * scale, float(phi))
 
 
@@ -260,6 +265,8 @@ def fit_ellipse(points, *, robust=False, residual_threshold=None, max_trials=200
         model = measure.EllipseModel.from_estimate(pts)  # for skimage's own message
         if not model:
             return EllipseFit(message=f"ellipse fit failed: {model}")
+    if not _proper(model):
+        return EllipseFit(message="ellipse fit gave a degenerate conic")
     inl = np.ones(n, bool)
     if robust:
         if residual_threshold is not None and residual_threshold <= 0:
@@ -276,7 +283,7 @@ def fit_ellipse(points, *, robust=False, residual_threshold=None, max_trials=200
             if rmodel is None or rinl is None or rinl.sum() < 5:
                 break
             refit = measure.EllipseModel.from_estimate(pts[rinl])
-            if not refit:
+            if not refit or not _proper(refit):
                 break
             res = _model_distance(refit, pts)
             new = res <= thr
@@ -287,8 +294,6 @@ def fit_ellipse(points, *, robust=False, residual_threshold=None, max_trials=200
                 break
     res = _model_distance(model, pts)
     a, b = (float(v) for v in model.axis_lengths)
-    if not (np.isfinite(a) and np.isfinite(b) and a > 0 and b > 0):
-        return EllipseFit(message="ellipse fit gave a degenerate conic")
     return EllipseFit(
         center=tuple(float(c) for c in model.center),
         semi_axes=(a, b),

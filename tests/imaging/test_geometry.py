@@ -201,9 +201,16 @@ def test_direct_ellipse_is_skimages_estimate(seed):
     np.testing.assert_allclose(fast.center, ref.center, rtol=1e-9, atol=1e-9 * max(a, b))
     np.testing.assert_allclose(fast.axis_lengths, ref.axis_lengths, rtol=1e-9)
     assert fast.theta == pytest.approx(float(ref.theta), abs=1e-9)
-    # degenerate input: no ellipse from either
+
+
+def test_degenerate_points_give_a_failed_fit_not_an_error():
+    """Collinear points, two parallel lines (the constraint at rounding level) and a zero axis in the distance."""
     line = np.c_[np.arange(10.0), 2 * np.arange(10.0)]
-    assert _direct_ellipse(line) is None or not EllipseModel.from_estimate(line)
+    two_lines = np.array([[-3, 1], [-5, 1], [-5, 0], [5, 1], [5, 1], [4, 0], [1, 0], [-4, 1], [-3, 1.0]])
+    for pts in (line, two_lines):
+        fit = fit_ellipse(pts)
+        assert not fit and fit.message
+    assert np.isnan(ellipse_distance([[1.0, 2.0]], (0, 0), (5.0, 0.0), 0.0)).all()
 
 
 def test_robust_ellipse_fit_rejects_outliers():

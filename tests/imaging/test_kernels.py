@@ -258,8 +258,8 @@ def test_lsq_spline_falls_back_on_an_empty_knot_span():
 
 
 @pytest.mark.parametrize("sigma", [0.5, 1.0, 2.3])
-def test_smoothed_transects_and_noise_equal_scipy(sigma):
-    from osmobulge.imaging._kernels import ends_noise, smoothed_transects
+def test_fill_and_smooth_and_noise_equal_scipy(sigma):
+    from osmobulge.imaging._kernels import _fill_and_smooth, ends_noise
 
     rng = np.random.default_rng(3)
     frame = (rng.random((60, 70)) * 1000).astype(np.uint16)
@@ -269,7 +269,7 @@ def test_smoothed_transects_and_noise_equal_scipy(sigma):
     raw = sample_transects(frame, 0, pts, d, offs)
     assert np.isnan(raw).any()
     want = ndi.gaussian_filter1d(np.where(np.isfinite(raw), raw, np.nanmedian(raw)), sigma, axis=0, mode="nearest")
-    got = smoothed_transects(frame, 0, pts, d, offs, sigma)
+    got = _fill_and_smooth(raw.copy(), float(sigma))
     np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-9)
     ends = np.c_[got[:, :4], got[:, -4:]]
     assert ends_noise(got) == pytest.approx(1.4826 * np.median(np.abs(np.diff(ends, axis=1))) / np.sqrt(2), rel=1e-12)
@@ -366,6 +366,21 @@ def test_robust_profile_spline_equals_numpy_fit(seed):
     np.testing.assert_allclose(curve, ref.sample(step=1.0)[1], rtol=0, atol=1e-9)
 
 
+def test_final_fit_falls_back_to_scipy_when_the_kernel_cannot_solve(monkeypatch):
+    """A status of 1 from the compiled fit (a singular band system) hands over to the numpy/scipy fit."""
+    import osmobulge.imaging.trace as T
+
+    th = np.linspace(np.pi, 0, 120)
+    U, Z = 80 * np.cos(th), 60 * np.sin(th) + np.random.default_rng(0).normal(0, 0.2, 120)
+    want, keep_want = T.ChamberTracer._robust_fit_py(U, Z, 6.0)
+    empty = (np.zeros(8), np.zeros((4, 2)), np.zeros(1), np.zeros(1), np.zeros(1), np.zeros((4, 2)))
+    monkeypatch.setattr(T, "robust_profile_spline", lambda *a: (1, np.ones(len(a[0]), bool), *empty))
+    spl, keep, curve = T.ChamberTracer._final_fit(U, Z, 6.0)
+    np.testing.assert_array_equal(keep, keep_want)
+    assert spl.length == pytest.approx(want.length, rel=1e-12)
+    np.testing.assert_allclose(curve, want.sample(step=1.0)[1], atol=1e-12)
+
+
 def test_abs_percentile_equals_numpy():
     from osmobulge.imaging._kernels import abs_percentile
 
@@ -403,9 +418,9 @@ def test_strongest_edge_equals_numpy_reference(k, sign):
 
 
 @pytest.mark.parametrize(("k", "step"), [(0, 2.0), (2, 4.0), (1, 0.7)])
-def test_guide_transects_equal_resample_normals_and_smoothed_transects(k, step):
-    """The fused station pass: resample_polyline, polyline_normals and smoothed_transects (repeated points too)."""
-    from osmobulge.imaging._kernels import guide_transects, smoothed_transects
+def test_guide_transects_equal_resample_normals_and_smoothed_samples(k, step):
+    """The fused station pass: resample_polyline, polyline_normals, samples nan-filled and smoothed along (scipy)."""
+    from osmobulge.imaging._kernels import guide_transects
     from osmobulge.imaging._normals import polyline_normals, resample_polyline
 
     rng = np.random.default_rng(k)
@@ -416,7 +431,10 @@ def test_guide_transects_equal_resample_normals_and_smoothed_transects(k, step):
     offs = np.arange(-9.0, 9.0 + 1e-9, 0.5)
     pts_r, s_r = resample_polyline(guide, step)
     nrm_r = polyline_normals(pts_r, smooth=2.0 / step)
-    prof_r = smoothed_transects(frame, k, pts_r, nrm_r, offs, 1.0 / step)
+    raw = sample_transects(frame, k, pts_r, nrm_r, offs)
+    assert np.isnan(raw).any()
+    prof_r = ndi.gaussian_filter1d(np.where(np.isfinite(raw), raw, np.nanmedian(raw)), 1.0 / step, axis=0,
+                                   mode="nearest")
     pts, s, nrm, prof = guide_transects(frame, k, guide, step, offs, 1.0 / step)
     np.testing.assert_allclose(pts, pts_r, rtol=0, atol=1e-9)
     np.testing.assert_allclose(s, s_r, rtol=0, atol=1e-9)
@@ -603,10 +621,13 @@ def test_block_mean_equals_numpy(dtype, f):
     from osmobulge.imaging._chamber import _coarse
 
     rng = np.random.default_rng(f)
-    frame = (rng.random((103, 77)) * 60000).astype(dtype)
-    h2, w2 = 103 // f * f, 77 // f * f
-    want = np.asarray(frame[:h2, :w2], np.float32).reshape(h2 // f, f, w2 // f, f).mean(axis=(1, 3))
-    got = _coarse(frame, f)
-    assert got.dtype == np.float32 and got.shape == want.shape
-    np.testing.assert_allclose(got, want, rtol=1e-6)
-    np.testing.assert_allclose(_coarse(np.rot90(frame), f), _coarse(np.ascontiguousarray(np.rot90(frame)), f))
+    frame = (rng.random((103, 77)) * 60000).astype(dtype) if dtype is not bool else rng.random((103, 77)) < 0.5
+
+    def want(a):
+        h2, w2 = a.shape[0] // f * f, a.shape[1] // f * f
+        return np.asarray(a[:h2, :w2], np.float32).reshape(h2 // f, f, w2 // f, f).mean(axis=(1, 3))
+
+    for a in (frame, np.rot90(frame)):  # a rotated view is not contiguous
+        got = _coarse(a, f)
+        assert got.dtype == np.float32 and got.shape == want(a).shape
+        np.testing.assert_allclose(got, want(a), rtol=1e-6)

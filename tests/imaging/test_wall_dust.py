@@ -53,3 +53,14 @@ def test_dusty_rows_finds_a_speck_and_keeps_clean_rows():
     assert grown[dusty].all() and grown.sum() > dusty.sum()  # the faint fringe goes too
     clean, _ = _dusty_rows(prof, offs, np.full(40, 0.3))
     assert clean.sum() <= 1  # noise alone: (almost) no row rejected
+
+
+def test_rows_without_an_edge_are_not_dust_and_do_not_grow():
+    """Rows already dropped (no edge: weak step, outside the view) must not take clean neighbours with them."""
+    rng = np.random.default_rng(1)
+    offs = np.arange(-8.0, 8.01, 0.5)
+    prof = 100.0 + 60.0 * (0.5 + 0.5 * np.tanh((offs[None, :] - 0.3) / 1.2)) + 0.5 * rng.standard_normal((40, 33))
+    pos = np.full(40, 0.3)
+    pos[:10] = np.nan
+    dusty, grown = _dusty_rows(prof, offs, pos)
+    assert not dusty[:10].any() and not grown[:15].any()  # (the old rule grew the nan run into rows 10-14)
