@@ -380,7 +380,12 @@ class _Run:
                 raise
             self.failed(i, err)
             return
-        _store(i, res, self, frame, p)
+        try:
+            _store(i, res, self, frame, p)
+        except Exception as err:  # noqa: BLE001 - a frame that cannot be stored is flagged, the series goes on
+            if errors == "raise":
+                raise
+            self.failed(i, err)
 
 
 #: per-chamber attributes that become variables over ``chamber`` when chambers are stacked

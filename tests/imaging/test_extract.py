@@ -1,5 +1,7 @@
 """extract(): synthetic series -> SI Dataset, save/load round trips, manual input, end-to-end permeability."""
 
+import importlib
+
 import numpy as np
 import pytest
 import xarray as xr
@@ -129,6 +131,29 @@ def test_unreadable_frame_is_flagged_not_fatal(series):
     assert out.flag.values[3] == "ok"
     with pytest.raises(RuntimeError, match="frame 2"):
         extract(frames[:3], pixel_size=1e-6, frame_interval=600.0, errors="raise", progress=False)
+
+
+def test_a_frame_that_cannot_be_stored_is_flagged_not_fatal(series, monkeypatch):
+    """An exception while describing one frame (here the paper's ellipse) flags that frame; the others are kept."""
+    E = importlib.import_module("osmobulge.imaging.extract")  # the module (the package exports the function)
+
+    real = E.fit_ellipse
+    calls = []
+
+    def flaky(pts, **kw):
+        calls.append(1)
+        if len(calls) == 2:
+            raise FloatingPointError("boom")
+        return real(pts, **kw)
+
+    monkeypatch.setattr(E, "fit_ellipse", flaky)
+    out = extract(series.frames[:4], pixel_size=1e-6, frame_interval=600.0, chamber=CH, progress=False)
+    bad = np.flatnonzero(out.flag.values != "ok")
+    assert len(bad) == 1 and "FloatingPointError: boom" in str(out.message.values[bad[0]])
+    assert (out.flag.values == "ok").sum() == 3
+    calls.clear()
+    with pytest.raises(FloatingPointError):
+        extract(series.frames[:4], pixel_size=1e-6, frame_interval=600.0, errors="raise", progress=False)
 
 
 def test_validation(series):
