@@ -28,7 +28,7 @@ __all__ = ["sample_transects", "ends_noise", "band_edges_rows", "step_crossing_r
            "guide_transects", "revolution_halves", "clean_stations", "rim_bridge",
            "abs_percentile", "ellipse_scatter", "ellipse_arc_volume",
            "dusty_rows", "ridge_rows", "block_mean",
-           "signed_profiles"]
+           "signed_profiles", "compiled_on_disk"]
 
 
 @njit(cache=True, nogil=True)
@@ -1406,3 +1406,18 @@ def signed_profiles(prof, polarity):
         fill_rows_nanmedian(q)
     return q
 
+
+
+def compiled_on_disk():
+    """Whether the tracer's largest kernels are in numba's disk cache (False: the first extraction compiles them).
+
+    A heuristic on numba's cache index files (one per function); True when it
+    cannot tell.
+    """
+    try:
+        from pathlib import Path
+
+        return all(Path(f._cache._cache_file._index_path).exists()
+                   for f in (robust_profile_spline, clean_stations, _guide_stations, dusty_rows, revolution_halves))
+    except Exception:  # noqa: BLE001 - numba internals: never fail an extraction over a progress message
+        return True

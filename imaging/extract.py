@@ -28,7 +28,7 @@ import xarray as xr
 
 from osmobulge import __version__
 from osmobulge.imaging._chamber import FrameView
-from osmobulge.imaging._kernels import ellipse_arc_volume
+from osmobulge.imaging._kernels import compiled_on_disk, ellipse_arc_volume
 from osmobulge.imaging.geometry import fit_ellipse
 from osmobulge.imaging.trace import FLAGS, ChamberTracer, TraceSettings
 
@@ -285,7 +285,8 @@ def extract(
         from rich.progress import Progress
 
         bar = Progress(transient=True)
-        task = bar.add_task("extracting", total=n)
+        first_note = "" if compiled_on_disk() else " (first run on this machine: compiling the tracer, about 20 s)"
+        task = bar.add_task("extracting" + first_note, total=n)
         bar.start()
     read = getattr(src, "peek", src.__getitem__)  # no copy of a memory-mapped frame: its pages are read on use
     try:
@@ -301,7 +302,7 @@ def extract(
                 for run in runs:
                     run.step(i, frame, p, errors)
             if bar is not None:
-                bar.advance(task)
+                bar.update(task, advance=1, description="extracting")
     finally:
         if bar is not None:
             bar.stop()

@@ -631,3 +631,16 @@ def test_block_mean_equals_numpy(dtype, f):
         got = _coarse(a, f)
         assert got.dtype == np.float32 and got.shape == want(a).shape
         np.testing.assert_allclose(got, want(a), rtol=1e-6)
+
+
+def test_compiled_on_disk_sees_a_missing_cache(monkeypatch, tmp_path):
+    """The first-run progress note: True once the kernels are cached, False when an index file is missing."""
+    from osmobulge.imaging import _kernels as K
+
+    index = tmp_path / "index.nbi"
+    index.write_bytes(b"")
+    for f in (K.robust_profile_spline, K.clean_stations, K._guide_stations, K.dusty_rows, K.revolution_halves):
+        monkeypatch.setattr(f._cache._cache_file, "_index_path", str(index))
+    assert K.compiled_on_disk() is True
+    monkeypatch.setattr(K.dusty_rows._cache._cache_file, "_index_path", str(tmp_path / "missing.nbi"))
+    assert K.compiled_on_disk() is False
