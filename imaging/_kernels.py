@@ -25,7 +25,7 @@ from numba import njit
 __all__ = ["sample_transects", "ends_noise", "band_edges_rows", "step_crossing_rows",
            "robust_line", "viterbi_rows", "lsq_spline", "fill_rows_nanmedian", "nanmedian", "longest_run",
            "ellipse_distance_folded", "robust_profile_spline", "strongest_edge", "native_frame",
-           "guide_transects", "revolution_halves", "clean_stations", "rim_bridge",
+           "guide_transects", "revolution_halves", "clean_stations", "rim_bridge", "rim_zone",
            "abs_percentile", "ellipse_scatter", "ellipse_arc_volume",
            "dusty_rows", "ridge_rows", "block_mean",
            "signed_profiles", "compiled_on_disk"]
@@ -650,7 +650,7 @@ def _weighted_fit(u, pts, w, t):
 
 @njit(cache=True, nogil=True)
 def robust_profile_spline(U, Z, ks, pinned, step):
-    """The tracer's robust profile spline (``ChamberTracer._robust_fit`` with ``final=True``), compiled.
+    """The tracer's final robust profile spline (``ChamberTracer._robust_fit`` with ``final=True``), compiled.
 
     Stage 1: a stiff spline (knots ``max(15, 2.5 ks)`` apart) over the chord
     parameter, up to 3 rounds of rejecting points beyond ``max(3.5 MAD, 1 px)``;
@@ -998,8 +998,17 @@ def revolution_halves(x, z, close):
 
 @njit(cache=True, nogil=True)
 def _excluded(u, z, R, zc, near):
-    """The tracer's rim zones: at or beyond a rim and low, or within ``near`` of a rim point."""
+    """The tracer's rim zones: at or beyond a rim and below ``zc``, or within ``near`` of a rim point."""
     return (abs(u) > R - 1.0 and z < zc) or np.hypot(abs(u) - R, z) < near
+
+
+@njit(cache=True, nogil=True)
+def rim_zone(u, z, R, zc, near):
+    """:func:`_excluded` of each point ``(u[i], z[i])`` (chamber px), as a bool array."""
+    out = np.empty(u.shape[0], np.bool_)
+    for i in range(u.shape[0]):
+        out[i] = _excluded(u[i], z[i], R, zc, near)
+    return out
 
 
 @njit(cache=True, nogil=True)

@@ -307,8 +307,8 @@ def extract(
         if bar is not None:
             bar.stop()
 
-    parts = [_dataset(r, times, p, chamber_attrs, n_profile, src, settings, bulge_direction, chamber_region, errors,
-                      metadata, fit_prestretch) for r in runs]
+    parts = [_dataset(r, times, p, chamber_attrs, src, settings, bulge_direction, chamber_region, errors, metadata,
+                      fit_prestretch) for r in runs]
     if chamber_region != "all":
         return parts[0]
     return stack_chambers(parts, [f"chamber-{c}" for c in range(len(parts))])
@@ -487,13 +487,12 @@ def _ellipse_volume(ell):
     return float(ellipse_arc_volume(float(xc), float(yc), float(a), float(b), float(ell.angle), 721))
 
 
-def _dataset(run, times, p, chamber_attrs, n_profile, src, settings, bulge_direction, chamber_region, errors,
-             metadata, do_fit):
+def _dataset(run, times, p, chamber_attrs, src, settings, bulge_direction, chamber_region, errors, metadata, do_fit):
     """One chamber's storage -> its Dataset (SI, CF attributes), with the pre-stretch fit."""
     tracer, scal, flag, flag_figure, source_kind, message = (run.tracer, run.scal, run.flag, run.flag_figure,
                                                              run.source_kind, run.message)
-    px, pz, pcol, prow, plen, priors_px, manual_px = run.px, run.pz, run.pcol, run.prow, run.plen, run.priors, \
-        run.manual
+    px, pz, pcol, prow, plen, n_profile = run.px, run.pz, run.pcol, run.prow, run.plen, run.n_profile
+    priors_px, manual_px = run.priors, run.manual
     n = len(times)
     ok = np.array([f == "ok" for f in flag])
     volume = 0.5 * (scal["volume_left"] + scal["volume_right"])

@@ -244,7 +244,7 @@ class _ArrayBackend:
         self.pixel_size, self.times, self.time_resolution, self.bad = None, None, 0.0, []
         self.source = "<array>"
 
-    def read(self, i):
+    def read(self, i, copy=True):  # noqa: ARG002 - frames of an array are views of it either way
         return _to_grey(np.asarray(self.arr[i]), self.grey)
 
     def close(self):
@@ -653,7 +653,7 @@ class _FolderBackend:
                 )
             self.pixel_size = float(np.median(pxs))
 
-    def read(self, i):
+    def read(self, i, copy=True):  # noqa: ARG002 - each file is decoded into a new array
         p = self.files[i]
         try:
             if p.suffix.lower() in (".tif", ".tiff"):
@@ -755,7 +755,7 @@ class _CziBackend:
             times = np.array([(s - stamps[0]).total_seconds() for s in stamps])
         return px, times, 0.0
 
-    def read(self, i):
+    def read(self, i, copy=True):  # noqa: ARG002 - each frame is decoded into a new array
         try:
             img, _ = self.czi.read_image(T=self.t0 + i, C=self.channel)
         except Exception as err:
@@ -854,7 +854,7 @@ class FrameSeries(Sequence):
     def _read(self, k, copy):
         j = int(self._index[k])
         try:
-            return self._b.read(j, copy=False) if not copy and isinstance(self._b, _TiffBackend) else self._b.read(j)
+            return self._b.read(j, copy=copy)
         except FrameReadError as err:
             entry = (self._b.names[j], str(err))
             if entry not in self._b.bad:

@@ -67,6 +67,7 @@ from osmobulge.imaging._kernels import (
     lsq_spline,
     native_frame,
     rim_bridge,
+    rim_zone,
     robust_profile_spline,
     sample_transects,
     strongest_edge,
@@ -267,7 +268,17 @@ class ChamberTracer:
         self.priors = {}  # frame index -> (u, z) guide in chamber px
         # flat-line columns: away from every well's rim
         self._flat_u = self._flat_columns(view)
-        self._rim_contact_u = None  # flat columns sampled for the rim contact (set on first use)
+        self._rim_contact_u = self._rim_contact_columns()
+
+    def _rim_contact_columns(self):
+        """The 15 flat columns nearest the axis on each side (left, right), where the rim contact is referred to."""
+        fars = []
+        for sgn in (-1.0, 1.0):
+            side = self._flat_u[np.sign(self._flat_u) == sgn]
+            if side.size < 5:  # no flat surface on this side in the field: use the other side's
+                side = self._flat_u
+            fars.append(side[np.argsort(np.abs(side))[:15]])
+        return fars
 
     # ---------------------------------------------------------------------- geometry
     def _estimate_blur(self, view):
@@ -540,9 +551,8 @@ class ChamberTracer:
         inside the rim: a station there is pulled off the dome and bends the
         bridge to the rim.
         """
-        R = g.rim_radius
-        zc, near = self._exclusion_zone(g)
-        return ((np.abs(u) > R - 1.0) & (z < zc)) | (np.hypot(np.abs(u) - R, z) < near)
+        return rim_zone(np.ascontiguousarray(u, np.float64), np.ascontiguousarray(z, np.float64),
+                        float(g.rim_radius), *self._exclusion_zone(g))
 
     def _exclusion_zone(self, g):
         """Height below which the band beyond a rim is flat, and the radius of the corner blob at a rim point."""
@@ -676,37 +686,32 @@ class ChamberTracer:
         return lsq_spline(u, pts, t, w)
 
     @classmethod
-    def _robust_fit(cls, U, Z, ks, *, pinned=True, final=True):
-        """Spline through (U, Z) rejecting outliers (dust bumps) against a stiff spline first.
-
-        The ends are pinned (weight 10) when ``pinned``.  Returns the final
-        :class:`~osmobulge.imaging.geometry.ProfileSpline` (knots ``ks`` apart; or
-        the stiff spline sampled every pixel when ``final`` is False) and the
-        mask of kept points.  The final fit runs compiled
-        (:func:`~osmobulge.imaging._kernels.robust_profile_spline`, the same
-        arithmetic as :meth:`_robust_fit_py`); scipy's solver takes over when a
-        band system is singular.
-        """
-        if final:
-            spl, keep, _ = cls._final_fit(U, Z, ks, pinned=pinned)
-            return spl, keep
-        return cls._robust_fit_py(U, Z, ks, pinned=pinned, final=final)
-
-    @classmethod
     def _final_fit(cls, U, Z, ks, *, pinned=True, step=1.0):
-        """:meth:`_robust_fit` (final), and its curve sampled every ``step`` px of arc length (N, 2)."""
+        """The final :meth:`_robust_fit`, compiled, and its curve sampled every ``step`` px of arc length (N, 2).
+
+        :func:`~osmobulge.imaging._kernels.robust_profile_spline` does the same
+        arithmetic as :meth:`_robust_fit` (tested equal); scipy's solver takes
+        over when a band system is singular.
+        """
         U, Z = np.ascontiguousarray(U, np.float64), np.ascontiguousarray(Z, np.float64)
         status, keep, t, c, res, uu, ss, curve = robust_profile_spline(U, Z, float(ks), bool(pinned), float(step))
         if status == 0:
             spl = interpolate.BSpline.construct_fast(t, c, 3, axis=1)
             return ProfileSpline(spline=spl, length=float(ss[-1]), residuals=res,
                                  _u_of_s=partial(np.interp, xp=ss, fp=uu)), keep, curve
-        spl, keep = cls._robust_fit_py(U, Z, ks, pinned=pinned)
+        spl, keep = cls._robust_fit(U, Z, ks, pinned=pinned)
         return spl, keep, spl.sample(step=step)[1]
 
     @classmethod
-    def _robust_fit_py(cls, U, Z, ks, *, pinned=True, final=True):
-        """:meth:`_robust_fit` in numpy/scipy (the guide's stiff curve, and the fallback of the compiled fit)."""
+    def _robust_fit(cls, U, Z, ks, *, pinned=True, final=True):
+        """Spline through (U, Z) rejecting outliers (dust bumps) against a stiff spline first (numpy/scipy).
+
+        The ends are pinned (weight 10) when ``pinned``.  Returns the final
+        :class:`~osmobulge.imaging.geometry.ProfileSpline` (knots ``ks`` apart; or
+        the stiff spline sampled every pixel when ``final`` is False) and the
+        mask of kept points.  Used for the guide's stiff curve and as the
+        fallback of :meth:`_final_fit`, the compiled final fit.
+        """
         pts = np.column_stack((U, Z))
         n = len(U)
         seg = np.hypot(*np.diff(pts, axis=0).T)
@@ -841,14 +846,6 @@ class ChamberTracer:
         uu = R + np.linspace(0.02, 0.1, 9) * R
         zw = 0.5 * g.thickness + 3.0 * self.blur + 4.0
         vals = []
-        if self._rim_contact_u is None:  # the flat columns nearest the axis on each side (fixed for the series)
-            fars = []
-            for sgn in (-1.0, 1.0):
-                side = self._flat_u[np.sign(self._flat_u) == sgn]
-                if side.size < 5:  # no flat surface on this side in the field: use the other side's
-                    side = self._flat_u
-                fars.append(side[np.argsort(np.abs(side))[:15]])
-            self._rim_contact_u = fars
         # one sampling call, per side: the band at the rim, the band far out and the water above it
         uz = [(u_, np.full(len(u_), z_)) for sgn, far in zip((-1.0, 1.0), self._rim_contact_u, strict=True)
               for u_, z_ in ((sgn * uu, 0.0), (far, 0.0), (far, zw))]

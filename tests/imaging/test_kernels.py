@@ -353,8 +353,8 @@ def test_robust_profile_spline_equals_numpy_fit(seed):
     Z[[0, -1]] = 0.0
     Z[rng.integers(5, n - 5, 3)] += rng.uniform(3, 10, 3)  # dust bumps: rejected by both
     ks = rng.uniform(4, 15)
-    fast, keep_fast = ChamberTracer._robust_fit(U, Z, ks)
-    ref, keep_ref = ChamberTracer._robust_fit_py(U, Z, ks)
+    fast, keep_fast, _ = ChamberTracer._final_fit(U, Z, ks)
+    ref, keep_ref = ChamberTracer._robust_fit(U, Z, ks)
     assert not keep_fast.all()
     np.testing.assert_array_equal(keep_fast, keep_ref)
     s = np.linspace(0, ref.length, 57)
@@ -372,7 +372,7 @@ def test_final_fit_falls_back_to_scipy_when_the_kernel_cannot_solve(monkeypatch)
 
     th = np.linspace(np.pi, 0, 120)
     U, Z = 80 * np.cos(th), 60 * np.sin(th) + np.random.default_rng(0).normal(0, 0.2, 120)
-    want, keep_want = T.ChamberTracer._robust_fit_py(U, Z, 6.0)
+    want, keep_want = T.ChamberTracer._robust_fit(U, Z, 6.0)
     empty = (np.zeros(8), np.zeros((4, 2)), np.zeros(1), np.zeros(1), np.zeros(1), np.zeros((4, 2)))
     monkeypatch.setattr(T, "robust_profile_spline", lambda *a: (1, np.ones(len(a[0]), bool), *empty))
     spl, keep, curve = T.ChamberTracer._final_fit(U, Z, 6.0)
@@ -467,6 +467,13 @@ def test_revolution_halves_equal_split_halves_and_measures(seed):
         revolution_measures(np.abs(x) + 0.1, z)
 
 
+def _ref_exclusion(tracer, g, u, z):
+    """The tracer's former numpy ``_exclusion``."""
+    R = g.rim_radius
+    zc, near = g.thickness + 3.0, 0.5 * g.thickness + 2.0 + 2.0 * tracer.blur
+    return ((np.abs(u) > R - 1.0) & (z < zc)) | (np.hypot(np.abs(u) - R, z) < near)
+
+
 def _ref_clean(tracer, g, r, ref_con):
     """The tracer's former numpy ``_clean``."""
     from osmobulge.imaging._chamber import _nanmedian
@@ -476,7 +483,7 @@ def _ref_clean(tracer, g, r, ref_con):
     pts = r["station_pts"] + np.nan_to_num(mid)[:, None] * r["normals"]
     pu, pz = g.line.coords(pts)
     good = np.isfinite(mid) & (r["contrast"] > max(st.min_contrast * ref_con, 4.0 * r.get("noise", 0.0)))
-    excl = tracer._exclusion(g, pu, pz) | tracer._exclusion(g, *g.line.coords(r["station_pts"]))
+    excl = _ref_exclusion(tracer, g, pu, pz) | _ref_exclusion(tracer, g, *g.line.coords(r["station_pts"]))
     use = good & ~excl
     if use.sum() > 10:
         filled = np.interp(np.arange(len(mid)), np.flatnonzero(use), mid[use])
@@ -539,6 +546,7 @@ def test_clean_and_bridge_equal_numpy_reference(seed):
     got = tr._clean(g, dict(r), ref_con)
     for key, w in zip(("pu", "pz", "good", "excluded", "use", "sigma"), want, strict=True):
         np.testing.assert_allclose(got[key], w, rtol=0, atol=1e-9, err_msg=key)
+    np.testing.assert_array_equal(tr._exclusion(g, got["pu"], got["pz"]), _ref_exclusion(tr, g, got["pu"], got["pz"]))
     assert 0 < got["use"].sum() < n
     pu, pz = got["pu"][got["use"]], got["pz"][got["use"]]
     for side in (-1.0, 1.0):
