@@ -22,13 +22,12 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["sample_transects", "ends_noise", "band_edges_rows", "step_crossing_rows",
-           "robust_line", "viterbi_rows", "lsq_spline", "fill_rows_nanmedian", "nanmedian", "longest_run",
-           "ellipse_distance_folded", "robust_profile_spline", "strongest_edge", "native_frame",
-           "guide_transects", "revolution_halves", "clean_stations", "rim_bridge", "rim_zone",
-           "abs_percentile", "ellipse_scatter", "ellipse_arc_volume",
-           "dusty_rows", "ridge_rows", "block_mean",
-           "signed_profiles", "compiled_on_disk"]
+__all__ = ["sample_transects", "ends_noise", "band_edges_rows", "step_crossing_rows", "robust_line",
+           "viterbi_rows", "lsq_spline", "fill_rows_nanmedian", "nanmedian", "longest_run", "running_percentile",
+           "low_contrast_run", "ellipse_distance_folded", "robust_profile_spline", "strongest_edge",
+           "native_frame", "guide_transects", "revolution_halves", "clean_stations", "rim_bridge", "rim_zone",
+           "abs_percentile", "extrapolated_curve", "ellipse_scatter", "direct_ellipse", "ellipse_arc_volume",
+           "dusty_rows", "ridge_rows", "block_mean", "signed_profiles", "compiled_on_disk"]
 
 
 @njit(cache=True, nogil=True)
@@ -36,6 +35,11 @@ def _sample_transects(frame, k, px, py, dx, dy, offsets, out):
     h, w = frame.shape
     n, m = out.shape
     hm, wm = h - 1.0, w - 1.0
+    flat = frame.ravel()
+    omin = omax = offsets[0] if m else 0.0
+    for j in range(m):
+        omin = min(omin, offsets[j])
+        omax = max(omax, offsets[j])
     for i in range(n):
         # the view's rotation as a linear map: stored (row, col) = start + offset * (drow, dcol)
         if k == 0:
@@ -46,6 +50,22 @@ def _sample_transects(frame, k, px, py, dx, dy, offsets, out):
             rs, cs, dr, dc = hm - py[i], wm - px[i], -dy[i], -dx[i]
         else:
             rs, cs, dr, dc = hm - px[i], py[i], -dx[i], dy[i]
+        # a transect whose ends lie inside the last pixel square needs no bounds checks (most of them)
+        r_lo, r_hi = min(rs + omin * dr, rs + omax * dr), max(rs + omin * dr, rs + omax * dr)
+        c_lo, c_hi = min(cs + omin * dc, cs + omax * dc), max(cs + omin * dc, cs + omax * dc)
+        if h > 1 and w > 1 and r_lo >= 1e-6 and c_lo >= 1e-6 and r_hi < hm - 1e-6 and c_hi < wm - 1e-6:
+            for j in range(m):
+                r = rs + offsets[j] * dr
+                c = cs + offsets[j] * dc
+                r0 = int(r)
+                c0 = int(c)
+                fr = r - r0
+                fc = c - c0
+                b0 = r0 * w + c0
+                a = flat[b0] * (1.0 - fc) + flat[b0 + 1] * fc
+                b = flat[b0 + w] * (1.0 - fc) + flat[b0 + w + 1] * fc
+                out[i, j] = a * (1.0 - fr) + b * fr
+            continue
         for j in range(m):
             r = rs + offsets[j] * dr
             c = cs + offsets[j] * dc
@@ -526,6 +546,72 @@ def longest_run(mask, weights):
         if cur > best:
             best = cur
     return best
+
+
+@njit(cache=True, nogil=True)
+def running_percentile(x, q, size):
+    """``scipy.ndimage.percentile_filter(x, q, size, mode="nearest")`` of a 1-D array without nan (odd ``size``).
+
+    A sorted window slid along ``x`` (the edge values repeated beyond the ends).
+    """
+    n = x.shape[0]
+    out = np.empty(n)
+    if n == 0:
+        return out
+    half = size // 2
+    rank = size - 1 if q == 100.0 else int(float(size) * q / 100.0)
+    buf = np.empty(size)
+    for j in range(size):
+        buf[j] = x[min(max(j - half, 0), n - 1)]
+    buf.sort()
+    for i in range(n):
+        out[i] = buf[rank]
+        if i == n - 1:
+            break
+        old = x[min(max(i - half, 0), n - 1)]
+        new = x[min(i + half + 1, n - 1)]
+        if old == new:
+            continue
+        k = np.searchsorted(buf, old)  # remove one copy of old, insert new, keeping buf sorted
+        if new > old:
+            while k + 1 < size and buf[k + 1] < new:
+                buf[k] = buf[k + 1]
+                k += 1
+        else:
+            while k > 0 and buf[k - 1] > new:
+                buf[k] = buf[k - 1]
+                k -= 1
+        buf[k] = new
+    return out
+
+
+@njit(cache=True, nogil=True)
+def low_contrast_run(contrast, mask, ds, noise, q=80.0, max_win=151):
+    """Longest run (sum of ``ds``) of the masked stations whose contrast falls below their surroundings (gaps).
+
+    The tracer's fracture figure: ``cd = nan_to_num(contrast[mask], nan=0)``;
+    ``local = max(percentile_filter(cd, q, win, mode="nearest"), median(cd) / 2)``
+    with ``win = min(max_win, 2 (len(cd) // 2) + 1)``; stations below
+    ``max(0.3 local, 3 noise)``; :func:`longest_run` of them weighted by ``ds[mask]``.
+    """
+    idx = np.flatnonzero(mask)
+    m = idx.shape[0]
+    if m == 0:
+        return 0.0
+    cd = np.empty(m)
+    w = np.empty(m)
+    big = 1.7976931348623157e308
+    for j in range(m):
+        v = contrast[idx[j]]
+        cd[j] = 0.0 if np.isnan(v) else (big if v == np.inf else (-big if v == -np.inf else v))
+        w[j] = ds[idx[j]]
+    win = min(max_win, 2 * (m // 2) + 1)
+    local = running_percentile(cd, q, win)
+    floor = 0.5 * np.median(cd)
+    low = np.empty(m, np.bool_)
+    for j in range(m):
+        low[j] = cd[j] < max(0.3 * max(local[j], floor), 3.0 * noise)
+    return longest_run(low, w)
 
 
 @njit(cache=True, nogil=True)
@@ -1146,6 +1232,51 @@ def rim_bridge(pu, pz, R, side, reach):
 
 
 @njit(cache=True, nogil=True)
+def _arc_fractions(u, z):
+    n = u.shape[0]
+    f = np.empty(n)
+    f[0] = 0.0
+    for i in range(1, n):
+        f[i] = f[i - 1] + np.hypot(u[i] - u[i - 1], z[i] - z[i - 1])
+    return f
+
+
+@njit(cache=True, nogil=True)
+def extrapolated_curve(pu, pz, qu, qz):
+    """The curve ``p`` moved on as it moved since ``q``: ``2 p - q`` at equal fractions of arc length (N, 2).
+
+    ``fp, fq`` the cumulative arc lengths; ``2 p - interp(fp / fp[-1], fq / fq[-1], q)``
+    (``np.interp``); ``p`` itself when either curve has no length.
+    """
+    n, m = pu.shape[0], qu.shape[0]
+    out = np.empty((n, 2))
+    out[:, 0] = pu
+    out[:, 1] = pz
+    fp, fq = _arc_fractions(pu, pz), _arc_fractions(qu, qz)
+    if not (fp[n - 1] > 0.0 and fq[m - 1] > 0.0):
+        return out
+    lp, lq = fp[n - 1], fq[m - 1]
+    for j in range(m):
+        fq[j] /= lq
+    j = 0
+    for i in range(n):
+        x = fp[i] / lp
+        if x >= fq[m - 1]:
+            iu, iz = qu[m - 1], qz[m - 1]
+        elif x < fq[0]:
+            iu, iz = qu[0], qz[0]
+        else:
+            while fq[j + 1] <= x:
+                j += 1
+            t = (x - fq[j]) / (fq[j + 1] - fq[j])
+            iu = qu[j] + t * (qu[j + 1] - qu[j])
+            iz = qz[j] + t * (qz[j + 1] - qz[j])
+        out[i, 0] = 2.0 * pu[i] - iu
+        out[i, 1] = 2.0 * pz[i] - iz
+    return out
+
+
+@njit(cache=True, nogil=True)
 def abs_percentile(x, mask, q):
     """``np.percentile(np.abs(x[mask]), q)`` (linear interpolation; nan when the mask is empty)."""
     n = 0
@@ -1204,6 +1335,155 @@ def ellipse_scatter(x, y):
                 S2[a, b] += d1[a] * d2[b]
                 S3[a, b] += d2[a] * d2[b]
     return x0, y0, scale, S1, S2, S3
+
+
+@njit(cache=True, nogil=True)
+def _solve3(A, B):
+    """A X = B for a 3 x 3 A (Gaussian elimination, partial pivoting); ok False when A is singular."""
+    a = A.copy()
+    x = B.copy()
+    m = x.shape[1]
+    scale = 0.0
+    for i in range(3):
+        for j in range(3):
+            scale = max(scale, abs(a[i, j]))
+    if not scale > 0.0:
+        return x, False
+    for col in range(3):
+        piv = col
+        for r in range(col + 1, 3):
+            if abs(a[r, col]) > abs(a[piv, col]):
+                piv = r
+        if not abs(a[piv, col]) > 1e-14 * scale:
+            return x, False
+        if piv != col:
+            for j in range(3):
+                a[col, j], a[piv, j] = a[piv, j], a[col, j]
+            for j in range(m):
+                x[col, j], x[piv, j] = x[piv, j], x[col, j]
+        for r in range(col + 1, 3):
+            f = a[r, col] / a[col, col]
+            for j in range(col, 3):
+                a[r, j] -= f * a[col, j]
+            for j in range(m):
+                x[r, j] -= f * x[col, j]
+    for col in range(2, -1, -1):
+        for j in range(m):
+            v = x[col, j]
+            for c in range(col + 1, 3):
+                v -= a[col, c] * x[c, j]
+            x[col, j] = v / a[col, col]
+    return x, True
+
+
+@njit(cache=True, nogil=True)
+def _null_vector3(A):
+    """Unit vector spanning the null space of a rank-2 3 x 3 matrix (the largest cross product of two rows)."""
+    best = np.zeros(3)
+    bn = 0.0
+    for i, j in ((0, 1), (0, 2), (1, 2)):
+        c0 = A[i, 1] * A[j, 2] - A[i, 2] * A[j, 1]
+        c1 = A[i, 2] * A[j, 0] - A[i, 0] * A[j, 2]
+        c2 = A[i, 0] * A[j, 1] - A[i, 1] * A[j, 0]
+        nn = np.sqrt(c0 * c0 + c1 * c1 + c2 * c2)
+        if nn > bn:
+            bn = nn
+            best[0], best[1], best[2] = c0 / nn, c1 / nn, c2 / nn
+    return best, bn > 0.0
+
+
+@njit(cache=True, nogil=True)
+def direct_ellipse(x, y):
+    """Halir & Flusser's direct ellipse, all compiled: ``status, xc, yc, width, height, phi``.
+
+    The algebra of :func:`osmobulge.imaging.geometry._direct_ellipse_numpy`
+    (skimage's :class:`~skimage.measure.EllipseModel` estimate): the 3 x 3
+    eigenproblem is solved through its characteristic cubic (three real roots,
+    each polished by Newton steps) and null vectors, without LAPACK.  ``status``
+    is 0 on success, 1 when no ellipse satisfies the constraint or the conic is
+    degenerate (the fit failed), 2 when this route cannot decide (a singular
+    scatter matrix, a cubic without three distinct real roots): the numpy
+    algebra decides then.
+    """
+    x0, y0, scale, S1, S2, S3 = ellipse_scatter(x, y)
+    if not scale >= 2.2250738585072014e-308:
+        return 1, np.nan, np.nan, np.nan, np.nan, np.nan
+    T, ok = _solve3(S3, S2.T.copy())
+    if not ok:
+        return 2, np.nan, np.nan, np.nan, np.nan, np.nan
+    for i in range(3):
+        for j in range(3):
+            T[i, j] = -T[i, j]
+    M0 = S1 + S2 @ T
+    M = np.empty((3, 3))
+    for j in range(3):
+        M[0, j] = M0[2, j] / 2.0
+        M[1, j] = -M0[1, j]
+        M[2, j] = M0[0, j] / 2.0
+    # characteristic polynomial l^3 + A l^2 + B l + C
+    A = -(M[0, 0] + M[1, 1] + M[2, 2])
+    B = (M[0, 0] * M[1, 1] - M[0, 1] * M[1, 0] + M[0, 0] * M[2, 2] - M[0, 2] * M[2, 0]
+         + M[1, 1] * M[2, 2] - M[1, 2] * M[2, 1])
+    C = -(M[0, 0] * (M[1, 1] * M[2, 2] - M[1, 2] * M[2, 1]) - M[0, 1] * (M[1, 0] * M[2, 2] - M[1, 2] * M[2, 0])
+          + M[0, 2] * (M[1, 0] * M[2, 1] - M[1, 1] * M[2, 0]))
+    p = B - A * A / 3.0
+    q = 2.0 * A * A * A / 27.0 - A * B / 3.0 + C
+    if not p < 0.0:
+        return 2, np.nan, np.nan, np.nan, np.nan, np.nan
+    rad = 2.0 * np.sqrt(-p / 3.0)
+    arg = 3.0 * q / (p * rad)
+    if not abs(arg) < 1.0 - 1e-9:  # (nearly) repeated roots: numpy decides
+        return 2, np.nan, np.nan, np.nan, np.nan, np.nan
+    phi0 = np.arccos(arg) / 3.0
+    found = 0
+    vec = np.zeros(3)
+    E = np.empty((3, 3))
+    for kk in range(3):
+        lam = rad * np.cos(phi0 - 2.0 * np.pi * kk / 3.0) - A / 3.0
+        for _ in range(3):  # Newton polish on the cubic
+            f = ((lam + A) * lam + B) * lam + C
+            d = (3.0 * lam + 2.0 * A) * lam + B
+            if d == 0.0:
+                break
+            lam -= f / d
+        for i in range(3):
+            for j in range(3):
+                E[i, j] = M[i, j] - (lam if i == j else 0.0)
+        v, ok = _null_vector3(E)
+        if not ok:
+            return 2, np.nan, np.nan, np.nan, np.nan, np.nan
+        if 4.0 * v[0] * v[2] - v[1] ** 2 > 0.0:
+            found += 1
+            vec[:] = v
+    if found != 1:
+        return 1, np.nan, np.nan, np.nan, np.nan, np.nan
+    a, b, c = vec[0], vec[1], vec[2]
+    d_ = T[0, 0] * a + T[0, 1] * b + T[0, 2] * c
+    f = T[1, 0] * a + T[1, 1] * b + T[1, 2] * c
+    g = T[2, 0] * a + T[2, 1] * b + T[2, 2] * c
+    b, d_, f = b / 2.0, d_ / 2.0, f / 2.0
+    den = b * b - a * c
+    xc, yc = (c * d_ - b * f) / den, (a * f - b * d_) / den
+    num = a * f * f + c * d_ * d_ + g * b * b - 2.0 * b * d_ * f - a * c * g
+    term = np.sqrt((a - c) ** 2 + 4.0 * b * b)
+    w2 = 2.0 * num / (den * (term - (a + c)))
+    h2 = 2.0 * num / (den * (-term - (a + c)))
+    width = np.sqrt(w2) if w2 >= 0.0 else np.nan
+    height = np.sqrt(h2) if h2 >= 0.0 else np.nan
+    if a == c:  # a circle's angle (numpy: an arctan of +-inf, or nan -> 0)
+        return 2, np.nan, np.nan, np.nan, np.nan, np.nan
+    phi = 0.5 * np.arctan((2.0 * b) / (a - c))
+    if a > c:
+        phi += 0.5 * np.pi
+    if width < height:
+        width, height = height, width
+        phi += np.pi / 2
+    phi %= np.pi
+    if not (np.isfinite(xc) and np.isfinite(yc) and np.isfinite(phi)):
+        return 2, np.nan, np.nan, np.nan, np.nan, np.nan
+    if not (np.isfinite(width * height) and width > 0 and height > 0):
+        return 1, np.nan, np.nan, np.nan, np.nan, np.nan
+    return 0, xc * scale + x0, yc * scale + y0, width * scale, height * scale, phi
 
 
 @njit(cache=True, nogil=True)

@@ -28,6 +28,7 @@ from scipy import interpolate
 from skimage import measure
 
 from osmobulge.imaging._kernels import (
+    direct_ellipse,
     ellipse_distance_folded,
     ellipse_scatter,
     lsq_spline,
@@ -170,9 +171,22 @@ def _direct_ellipse(pts):
     1e-9 against skimage in the tests) without the model-object overhead,
     which cost about 0.3 ms a fit: the extraction fits one per frame.  None
     when no ellipse satisfies the constraint (or the points are degenerate).
-    The scatter sums are compiled; the 3 x 3 algebra stays in numpy (numba's
-    eigensolver takes about 10 s to compile and would gain 0.08 ms a frame).
+    Compiled (:func:`~osmobulge.imaging._kernels.direct_ellipse`: the 3 x 3
+    eigenproblem through its cubic, 10 us a fit); the numpy algebra
+    (:func:`_direct_ellipse_numpy`) decides the cases that route cannot
+    (repeated roots, a singular scatter matrix).
     """
+    status, xc, yc, width, height, phi = direct_ellipse(np.ascontiguousarray(pts[:, 0], np.float64),
+                                                        np.ascontiguousarray(pts[:, 1], np.float64))
+    if status == 0:
+        return _Conic(np.array([xc, yc]), np.array([width, height]), float(phi))
+    if status == 1:
+        return None
+    return _direct_ellipse_numpy(pts)
+
+
+def _direct_ellipse_numpy(pts):
+    """:func:`_direct_ellipse` in numpy: the scatter sums compiled, the 3 x 3 algebra with LAPACK."""
     x0, y0, scale, S1, S2, S3 = ellipse_scatter(np.ascontiguousarray(pts[:, 0]), np.ascontiguousarray(pts[:, 1]))
     if not scale >= np.finfo(float).tiny:
         return None

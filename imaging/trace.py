@@ -62,8 +62,9 @@ from osmobulge.imaging._kernels import (
     abs_percentile,
     clean_stations,
     ends_noise,
+    extrapolated_curve,
     guide_transects,
-    longest_run,
+    low_contrast_run,
     lsq_spline,
     native_frame,
     rim_bridge,
@@ -612,15 +613,10 @@ class ChamberTracer:
         frame just before the last, the last dome itself.
         """
         p, q = self.prev, self._prev2
-        cur = np.column_stack((p.u, p.z))
         if (q is None or q.index != p.index - 1 or p.index != index - 1 or len(q.u) < 4 or p.source != "auto"
                 or q.source != "auto"):
-            return cur
-        fp, fq = (np.concatenate(([0.0], np.cumsum(np.hypot(np.diff(t.u), np.diff(t.z))))) for t in (p, q))
-        if not (fp[-1] > 0 and fq[-1] > 0):
-            return cur
-        x, xq = fp / fp[-1], fq / fq[-1]
-        return 2.0 * cur - np.column_stack((np.interp(x, xq, q.u), np.interp(x, xq, q.z)))
+            return np.column_stack((p.u, p.z))
+        return extrapolated_curve(*(np.ascontiguousarray(v, np.float64) for v in (p.u, p.z, q.u, q.z)))
 
     def _trustworthy(self, tr):
         """A tracked (not global) result good enough to keep: strong band along the whole dome.
@@ -831,16 +827,10 @@ class ChamberTracer:
         dome = ~excl
         ref = tr["ref_contrast"]
         fig["dome_contrast"] = float(_nanmedian(con[dome]) / ref) if dome.any() and ref > 0 else 0.0
-        # gaps: stations whose band contrast drops well below the dome's own (a running median along
-        # the curve: the thin pole is fainter than the rims) and into the noise
-        cd = np.nan_to_num(con[dome], nan=0.0)
-        if cd.size:
-            win = min(151, 2 * (cd.size // 2) + 1)
-            local = np.maximum(ndi.percentile_filter(cd, 80, size=win, mode="nearest"), 0.5 * _nanmedian(cd))
-            low = cd < np.maximum(0.3 * local, 3.0 * tr.get("noise", 0.0))
-            fig["gap_length"] = float(longest_run(low, ds[dome]) / max(g.thickness, 1.0))
-        else:
-            fig["gap_length"] = 0.0
+        # gaps: stations whose band contrast drops well below the dome's own (a running 80th percentile
+        # along the curve: the thin pole is fainter than the rims) and into the noise
+        fig["gap_length"] = float(low_contrast_run(np.ascontiguousarray(con, np.float64), dome, ds,
+                                                   float(tr.get("noise", 0.0))) / max(g.thickness, 1.0))
         # rim contact: membrane on the flat line just outside each rim, as a fraction of the
         # band's contrast against the water on the nearest flat columns (1 = on the surface, 0 = lifted)
         uu = R + np.linspace(0.02, 0.1, 9) * R

@@ -203,6 +203,49 @@ def test_direct_ellipse_is_skimages_estimate(seed):
     assert fast.theta == pytest.approx(float(ref.theta), abs=1e-9)
 
 
+@pytest.mark.parametrize("seed", range(6))
+def test_compiled_direct_ellipse_equals_the_numpy_algebra(seed):
+    """The compiled eigenproblem (characteristic cubic, null vectors) gives LAPACK's ellipse, and the same failures."""
+    from osmobulge.imaging._kernels import direct_ellipse
+    from osmobulge.imaging.geometry import _direct_ellipse_numpy
+
+    rng = np.random.default_rng(100 + seed)
+    n_ok = 0
+    for _ in range(50):
+        a, b = rng.uniform(5.0, 300.0, 2)
+        th, c = rng.uniform(-3.0, 3.0), rng.uniform(-200.0, 200.0, 2)
+        t = rng.uniform(0, 2 * np.pi) + np.linspace(0.0, rng.uniform(0.8, 2 * np.pi), int(rng.integers(6, 300)))
+        pts = np.c_[c[0] + a * np.cos(t) * np.cos(th) - b * np.sin(t) * np.sin(th),
+                    c[1] + a * np.cos(t) * np.sin(th) + b * np.sin(t) * np.cos(th)]
+        pts += rng.normal(0, rng.choice([0.0, 1e-3, 1e-2, 0.1]) * min(a, b), pts.shape)
+        status, xc, yc, w, h, phi = direct_ellipse(pts[:, 0].copy(), pts[:, 1].copy())
+        ref = _direct_ellipse_numpy(pts)
+        assert status in (0, 1)
+        assert (status == 1) == (ref is None)
+        if status == 0:
+            n_ok += 1
+            np.testing.assert_allclose([xc, yc], ref.center, rtol=0, atol=1e-7 * max(a, b))
+            np.testing.assert_allclose([w, h], ref.axis_lengths, rtol=1e-7)
+            if abs(w - h) > 1e-3 * w:  # a circle's angle is arbitrary
+                assert abs((phi - ref.theta + np.pi / 2) % np.pi - np.pi / 2) < 1e-6
+    assert n_ok >= 45
+    # collinear points: no ellipse either way
+    line = np.c_[np.arange(10.0), 2 * np.arange(10.0)]
+    assert direct_ellipse(line[:, 0].copy(), line[:, 1].copy())[0] != 0 and _direct_ellipse_numpy(line) is None
+
+
+def test_direct_ellipse_leaves_undecided_cases_to_numpy(monkeypatch):
+    """Status 2 of the compiled fit (repeated roots, a singular scatter) hands the points to the numpy algebra."""
+    from osmobulge.imaging import geometry as G
+
+    t = np.linspace(0.3, 2.8, 60)
+    pts = np.c_[90 * np.cos(t), 10 + 60 * np.sin(t)]
+    monkeypatch.setattr(G, "direct_ellipse", lambda x, y: (2, *([np.nan] * 5)))
+    fit = G._direct_ellipse(pts)
+    np.testing.assert_allclose(fit.center, [0.0, 10.0], atol=1e-6)
+    np.testing.assert_allclose(fit.axis_lengths, [90.0, 60.0], rtol=1e-9)
+
+
 def test_degenerate_points_give_a_failed_fit_not_an_error():
     """Collinear points, two parallel lines (the constraint at rounding level) and a zero axis in the distance."""
     line = np.c_[np.arange(10.0), 2 * np.arange(10.0)]

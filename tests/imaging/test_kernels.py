@@ -318,6 +318,45 @@ def test_longest_run():
     assert longest_run(m, w) == 3.0 and longest_run(~m, w) == 9.0 and longest_run(m[:0], w[:0]) == 0.0
 
 
+@pytest.mark.parametrize("size", [1, 3, 41, 151])
+def test_running_percentile_equals_scipy(size):
+    from osmobulge.imaging._kernels import running_percentile
+
+    rng = np.random.default_rng(size)
+    for n in (1, 5, 150, 700):
+        x = rng.normal(0, 1, n)
+        x[rng.random(n) < 0.2] = 0.0  # ties (stations set to zero)
+        for q in (0.0, 50.0, 80.0, 100.0):
+            want = ndi.percentile_filter(x, q, size=size, mode="nearest")
+            np.testing.assert_array_equal(running_percentile(x, q, size), want)
+
+
+def test_low_contrast_run_equals_the_numpy_figure():
+    from osmobulge.imaging._kernels import low_contrast_run
+
+    rng = np.random.default_rng(7)
+    for n in (0, 3, 160, 600):
+        con = rng.uniform(0.5, 1.0, n)
+        con[n // 3: n // 3 + n // 10] *= 0.1  # a gap
+        con[rng.random(n) < 0.05] = np.nan
+        dome = rng.random(n) < 0.9
+        ds = rng.uniform(0.5, 1.5, n)
+        cd = np.nan_to_num(con[dome], nan=0.0)
+        want = 0.0
+        if cd.size:
+            win = min(151, 2 * (cd.size // 2) + 1)
+            local = np.maximum(ndi.percentile_filter(cd, 80, size=win, mode="nearest"), 0.5 * np.median(cd))
+            low = cd < np.maximum(0.3 * local, 3.0 * 0.02)
+            run, best = 0.0, 0.0
+            for lo_, w in zip(low, ds[dome], strict=True):
+                run = run + w if lo_ else 0.0
+                best = max(best, run)
+            want = best
+        assert low_contrast_run(con, dome, ds, 0.02) == pytest.approx(want, rel=1e-12, abs=0)
+        if n >= 160:
+            assert want > 0.05 * n * 0.9  # the gap is found (not a vacuous comparison)
+
+
 def test_nanmedian_equals_numpy():
     from osmobulge.imaging._kernels import nanmedian
 
@@ -392,6 +431,29 @@ def test_abs_percentile_equals_numpy():
         for q in (0.0, 50.0, 90.0, 100.0):
             assert abs_percentile(x, m, q) == pytest.approx(np.percentile(np.abs(x[m]), q), rel=1e-12, abs=1e-15)
     assert np.isnan(abs_percentile(np.ones(3), np.zeros(3, bool), 90.0))
+
+
+def test_extrapolated_curve_equals_numpy():
+    """The tracker's prediction: the last dome moved on as it moved since the one before (equal arc fractions)."""
+    from osmobulge.imaging._kernels import extrapolated_curve
+
+    def reference(p, q):
+        fp, fq = (np.concatenate(([0.0], np.cumsum(np.hypot(*np.diff(c, axis=0).T)))) for c in (p, q))
+        if not (fp[-1] > 0 and fq[-1] > 0):
+            return p
+        x, xq = fp / fp[-1], fq / fq[-1]
+        return 2.0 * p - np.column_stack((np.interp(x, xq, q[:, 0]), np.interp(x, xq, q[:, 1])))
+
+    rng = np.random.default_rng(4)
+    for n, m in ((300, 280), (50, 51), (5, 400), (2, 2)):
+        t, tq = np.sort(rng.uniform(0, np.pi, n)), np.sort(rng.uniform(0, np.pi, m))
+        p = np.c_[-100 * np.cos(t), 60 * np.sin(t)]
+        q = np.c_[-98 * np.cos(tq), 55 * np.sin(tq)]
+        q[m // 2] = q[m // 2 - 1]  # a repeated point (zero-length segment)
+        got = extrapolated_curve(p[:, 0].copy(), p[:, 1].copy(), q[:, 0].copy(), q[:, 1].copy())
+        np.testing.assert_allclose(got, reference(p, q), rtol=0, atol=1e-9)
+    flat = np.zeros((4, 2))
+    assert (extrapolated_curve(*flat.T.copy(), *flat.T.copy()) == 0).all()
 
 
 @pytest.mark.parametrize(("k", "sign"), [(0, 1.0), (1, -1.0), (3, 1.0)])
