@@ -34,6 +34,7 @@ from osmobulge.imaging._kernels import (
     sample_transects,
     signed_profiles,
     step_crossing_rows,
+    wall_rows,
 )
 
 __all__ = ["FrameView", "Line", "Well", "ChamberGeometry", "ROTATIONS", "detect_orientation", "find_chambers",
@@ -432,6 +433,21 @@ def _dusty_rows(prof, offs, pos, *, gap=2.0, clip=3.0):
                       np.ascontiguousarray(pos, np.float64), float(gap), float(clip))
 
 
+def _wall_rows_numpy(view, line, u0, slope, zs, top, offs):
+    """:func:`~osmobulge.imaging._kernels.wall_rows` in numpy (the reference of its test)."""
+    uc = u0 + slope * (zs - top)
+    prof = view.transects(line.point(uc, zs), np.broadcast_to(line.direction, (len(zs), 2)), offs)
+    pos, step = step_crossing(prof, offs)
+    med = _nanmedian(step)
+    pos = np.where((np.sign(step) == np.sign(med)) & (np.abs(step) > 0.5 * abs(med)), pos, np.nan)
+    for dusty in _dusty_rows(prof, offs, pos)[::-1]:
+        kept = ~dusty & np.isfinite(pos)
+        if kept.sum() >= 6 and (kept.sum() >= 0.3 * len(zs) or np.std(zs[kept]) >= 0.5 * np.std(zs)):
+            pos = np.where(dusty, np.nan, pos)
+            break
+    return zs - top, uc + pos
+
+
 def measure_walls(view, line, well, *, thickness, window, n_rows=None):
     """Sub-pixel wall lines of a well; returns the refined :class:`Well` and the wall RMS (px).
 
@@ -456,25 +472,19 @@ def measure_walls(view, line, well, *, thickness, window, n_rows=None):
     out = {}
     rms_all = []
     offs = np.arange(-window, window + 1e-9, 0.5)
-    d = np.broadcast_to(line.direction, (len(zs), 2))
+    d, nv = line.direction, line.normal
+    frame = native_frame(view.frame)
     rows = {}  # name -> (zz, uu) of the rows behind the kept fit (inliers only)
     for name, u0, slope in (("left", well.u_left, well.slope_left), ("right", well.u_right, well.slope_right)):
         first = (np.nan, np.nan, np.inf, None)  # (a, b, rms, rows) of the first fit
         for attempt in range(2):
-            uc = u0 + slope * (zs - top)
-            prof = view.transects(line.point(uc, zs), d, offs)
-            pos, step = step_crossing(prof, offs)
-            # rows whose step is not the wall's (dust on the wall, a speck in a side window) are not used
-            med = _nanmedian(step)
-            pos = np.where((np.sign(step) == np.sign(med)) & (np.abs(step) > 0.5 * abs(med)), pos, np.nan)
-            # nor rows a speck darkens on either side (it bends their crossings by up to a few px while
-            # their step stays strong), unless that would leave too few rows (then the clipped fits decide)
-            for dusty in _dusty_rows(prof, offs, pos)[::-1]:
-                kept = ~dusty & np.isfinite(pos)
-                if kept.sum() >= 6 and (kept.sum() >= 0.3 * len(zs) or np.std(zs[kept]) >= 0.5 * np.std(zs)):
-                    pos = np.where(dusty, np.nan, pos)
-                    break
-            zz, uu = zs - top, uc + pos
+            # step crossings on rows along the line at the predicted wall; rows whose step is not the wall's
+            # (dust on the wall, a speck in a side window) are not used, nor rows a speck darkens on either
+            # side (it bends their crossings by up to a few px while their step stays strong), unless that
+            # would leave too few rows (then the clipped fits decide): compiled, the numpy form is
+            # `_wall_rows_numpy`
+            zz, uu = wall_rows(frame, view.k, float(line.x0), float(line.y0), float(d[0]), float(d[1]),
+                               float(nv[0]), float(nv[1]), float(u0), float(slope), zs, float(top), offs)
             if attempt:
                 # a poor first fit (dust over part of the wall): start from the repeated-median line
                 # (50 % breakdown), keep the rows near it, then the clipped least squares

@@ -27,7 +27,7 @@ __all__ = ["sample_transects", "ends_noise", "band_edges_rows", "step_crossing_r
            "low_contrast_run", "ellipse_distance_folded", "robust_profile_spline", "strongest_edge",
            "native_frame", "guide_transects", "revolution_halves", "clean_stations", "rim_bridge", "rim_zone",
            "abs_percentile", "extrapolated_curve", "ellipse_scatter", "direct_ellipse", "ellipse_arc_volume",
-           "dusty_rows", "ridge_rows", "block_mean", "signed_profiles", "compiled_on_disk"]
+           "dusty_rows", "wall_rows", "ridge_rows", "block_mean", "signed_profiles", "compiled_on_disk"]
 
 
 @njit(cache=True, nogil=True)
@@ -906,6 +906,7 @@ def _strongest_edge(frame, k, px, py, dx, dy, offsets, sign):
     _sample_transects(frame, k, px, py, dx, dy, offsets, prof)
     med = np.empty(m)
     col = np.empty(n)
+    buf = np.empty(n)
     for j in range(m):
         c = 0
         for i in range(n):
@@ -915,7 +916,7 @@ def _strongest_edge(frame, k, px, py, dx, dy, offsets, sign):
                 c += 1
         if c == 0:
             return -1
-        med[j] = np.median(col[:c])
+        med[j] = _median_small(col, 0, c, buf)  # a few rows: insertion sort, not np.median's allocations
     wts = np.empty(9)
     tot = 0.0
     for q in range(9):
@@ -1625,6 +1626,69 @@ def dusty_rows(prof, offs, pos, gap, clip):
         i = j
     return dusty, grown
 
+
+
+@njit(cache=True, nogil=True)
+def wall_rows(frame, k, x0, y0, d0, d1, n0, n1, u0, slope, zs, top, offs):
+    """One wall's rows for its line fit: height above the surface and edge position ``(zz, uu)`` (nan: dropped).
+
+    The first attempt of :func:`osmobulge.imaging._chamber.measure_walls`
+    compiled: transects along the line direction ``(d0, d1)`` at the predicted
+    wall ``u0 + slope (zs - top)`` of the line ``(x0, y0)`` with normal
+    ``(n0, n1)``, their mid-level step crossings (4 samples a side level),
+    rows whose step is of the other sign or weaker than half the median
+    dropped, then the rows :func:`dusty_rows` marks (the grown runs if that
+    leaves 6 rows and either 30 % of them or half the rows' spread, else the
+    runs themselves, else none).
+    """
+    n = zs.shape[0]
+    m = offs.shape[0]
+    px = np.empty(n)
+    py = np.empty(n)
+    dx = np.full(n, d0)
+    dy = np.full(n, d1)
+    uc = np.empty(n)
+    for i in range(n):
+        uc[i] = u0 + slope * (zs[i] - top)
+        px[i] = x0 + uc[i] * d0 + zs[i] * n0
+        py[i] = y0 + uc[i] * d1 + zs[i] * n1
+    prof = np.empty((n, m))
+    _sample_transects(frame, k, px, py, dx, dy, offs, prof)
+    out = np.empty((2, n))
+    _step_crossing_rows(prof, offs, min(4, m), out)
+    pos = out[0].copy()
+    med = _nanmedian_flat(out[1])
+    for i in range(n):
+        st = out[1, i]
+        if not (((st > 0 and med > 0) or (st < 0 and med < 0)) and abs(st) > 0.5 * abs(med)):
+            pos[i] = np.nan
+    dusty, grown = dusty_rows(prof, offs, pos, 2.0, 3.0)
+    sd_all = np.std(zs)
+    for c in range(2):
+        cand = grown if c == 0 else dusty
+        cnt = 0
+        for i in range(n):
+            if not cand[i] and np.isfinite(pos[i]):
+                cnt += 1
+        if cnt < 6:
+            continue
+        zk = np.empty(cnt)
+        j2 = 0
+        for i in range(n):
+            if not cand[i] and np.isfinite(pos[i]):
+                zk[j2] = zs[i]
+                j2 += 1
+        if cnt >= 0.3 * n or np.std(zk) >= 0.5 * sd_all:
+            for i in range(n):
+                if cand[i]:
+                    pos[i] = np.nan
+            break
+    zz = np.empty(n)
+    uu = np.empty(n)
+    for i in range(n):
+        zz[i] = zs[i] - top
+        uu[i] = uc[i] + pos[i]
+    return zz, uu
 
 @njit(cache=True, nogil=True)
 def ridge_rows(img, w_max):

@@ -64,3 +64,32 @@ def test_rows_without_an_edge_are_not_dust_and_do_not_grow():
     pos[:10] = np.nan
     dusty, grown = _dusty_rows(prof, offs, pos)
     assert not dusty[:10].any() and not grown[:15].any()  # (the old rule grew the nan run into rows 10-14)
+
+
+@pytest.mark.parametrize("seed", [100, 101, 103])
+def test_compiled_wall_rows_equal_the_numpy_rows(seed):
+    """The compiled rows of a wall fit (steps, sign and strength, dusty rows) are measure_walls' former numpy rows."""
+    from osmobulge.imaging._chamber import FrameView, _wall_rows_numpy
+    from osmobulge.imaging._kernels import wall_rows
+
+    s = render_series(VT[[0, 8, 15]], nuisances=ALL.__class__(**{**ALL.__dict__, "dust_count": 60}), seed=seed,
+                      **SMALL)
+    tracer, traces = trace_series(s.frames)
+    n_dropped = 0
+    for fr, tr in zip(s.frames, traces, strict=True):
+        g = tr.geometry
+        view = FrameView(fr, tracer.k)
+        top = -0.5 * g.thickness
+        zs = top - np.linspace(0.06, 0.92, int(np.clip(0.86 * g.well.depth, 8, 250))) * g.well.depth
+        offs = np.arange(-8.0, 8.0 + 1e-9, 0.5)
+        for u0, slope in ((g.well.u_left, g.well.slope_left), (g.well.u_right, g.well.slope_right)):
+            for du in (0.0, 2.5):  # on the wall and a little off it
+                d, nv = g.line.direction, g.line.normal
+                got = wall_rows(fr, tracer.k, g.line.x0, g.line.y0, d[0], d[1], nv[0], nv[1], u0 + du, slope, zs,
+                                top, offs)
+                want = _wall_rows_numpy(view, g.line, u0 + du, slope, zs, top, offs)
+                np.testing.assert_array_equal(np.isnan(got[1]), np.isnan(want[1]))
+                np.testing.assert_allclose(got[0], want[0], rtol=0, atol=1e-12)
+                np.testing.assert_allclose(got[1], want[1], rtol=0, atol=1e-9, equal_nan=True)
+                n_dropped += int(np.isnan(want[1]).sum())
+    assert n_dropped > 0  # some rows were dropped (dust, weak steps): both branches compared
