@@ -24,6 +24,8 @@ from scipy import ndimage as ndi
 from scipy.stats import siegelslopes
 
 from osmobulge.imaging._kernels import (
+    WALL_FIT,
+    WALL_SIDE,
     band_edges_rows,
     block_mean,
     dusty_rows,
@@ -243,7 +245,7 @@ def band_edges(profiles, offsets, polarity, *, centre=None, search=None, side=4)
     return tuple(band_edges_rows(q, offsets, c, s, side))
 
 
-def step_crossing(profiles, offsets, *, side=4):
+def step_crossing(profiles, offsets, *, side=4, fit=0):
     """Sub-pixel position of a step edge (mid-level crossing nearest the profile centre).
 
     Parameters
@@ -253,14 +255,18 @@ def step_crossing(profiles, offsets, *, side=4):
     offsets : ndarray of shape (K,)
         Sample positions (px).
     side : int
-        Samples averaged at each end for the two levels.
+        Samples at each end whose median is the level on that side.
+    fit : int
+        0: the crossing between the two samples straddling the mid level; else
+        of the least-squares line through the ``2 fit`` samples around them
+        (less noise: ``fit=3`` on the walls).
 
     Returns
     -------
     pos, step : ndarray of shape (N,)
         Edge offset (nan if no crossing) and signed step (last level - first level).
     """
-    return tuple(step_crossing_rows(np.asarray(profiles, float), offsets, side))
+    return tuple(step_crossing_rows(np.asarray(profiles, float), offsets, side, fit))
 
 
 def _robust_line(x, y, *, iters=4, clip=3.0, floor=0.1):
@@ -437,7 +443,7 @@ def _wall_rows_numpy(view, line, u0, slope, zs, top, offs):
     """:func:`~osmobulge.imaging._kernels.wall_rows` in numpy (the reference of its test)."""
     uc = u0 + slope * (zs - top)
     prof = view.transects(line.point(uc, zs), np.broadcast_to(line.direction, (len(zs), 2)), offs)
-    pos, step = step_crossing(prof, offs)
+    pos, step = step_crossing(prof, offs, side=WALL_SIDE, fit=WALL_FIT)
     med = _nanmedian(step)
     pos = np.where((np.sign(step) == np.sign(med)) & (np.abs(step) > 0.5 * abs(med)), pos, np.nan)
     for dusty in _dusty_rows(prof, offs, pos)[::-1]:

@@ -86,7 +86,7 @@ def ref_viterbi_path(score, max_step=1, penalty=0.0):
     return path
 
 
-def ref_step_crossing(profiles, offsets, *, side=4):
+def ref_step_crossing(profiles, offsets, *, side=4, fit=0):
     q = np.asarray(profiles, float)
     n, k = q.shape
     a = np.median(q[:, :side], axis=1)
@@ -103,6 +103,15 @@ def ref_step_crossing(profiles, offsets, *, side=4):
         t = np.clip((lev - q0) / (q1 - q0), 0.0, 1.0)
     pos = offsets[jj] + t * (offsets[np.minimum(jj + 1, k - 1)] - offsets[jj])
     pos[~ok] = np.nan
+    for i in np.flatnonzero(ok) if fit else ():  # the crossing of a line through 2 fit samples around it
+        j0, j1 = max(jj[i] - fit + 1, 0), min(jj[i] + fit, k - 1)
+        x, y = offsets[j0:j1 + 1], q[i, j0:j1 + 1]
+        f = np.isfinite(y)
+        if f.sum() < 3:
+            continue
+        c1, c0 = np.polyfit(x[f] - pos[i], y[f], 1)
+        if c1 != 0 and (c1 > 0) == (q[i, jj[i] + 1] > q[i, jj[i]]) and abs((lev[i] - c0) / c1) <= 0.5 * (x[-1] - x[0]):
+            pos[i] += (lev[i] - c0) / c1
     return pos, b - a
 
 
@@ -284,10 +293,10 @@ def test_step_crossing_equals_numpy_reference(seed):
     prof += rng.normal(0, 2, prof.shape)
     prof[::23, 0] = np.nan  # a side level lost: no crossing, nan step
     prof[7] = 5.0  # flat: no crossing
-    for side in (1, 4, 9):
-        got, want = step_crossing(prof, offs, side=side), ref_step_crossing(prof, offs, side=side)
+    for side, fit in ((1, 0), (4, 0), (9, 0), (8, 3), (4, 2)):
+        got, want = step_crossing(prof, offs, side=side, fit=fit), ref_step_crossing(prof, offs, side=side, fit=fit)
         for g, w_ in zip(got, want, strict=True):
-            np.testing.assert_allclose(g, w_, rtol=1e-12, atol=1e-12, equal_nan=True)
+            np.testing.assert_allclose(g, w_, rtol=1e-9, atol=1e-9, equal_nan=True)
     assert np.isfinite(got[0]).mean() > 0.7
 
 
