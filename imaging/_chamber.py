@@ -457,7 +457,8 @@ def _wall_rows_numpy(view, line, u0, slope, zs, top, offs):
 def measure_walls(view, line, well, *, thickness, window, n_rows=None):
     """Sub-pixel wall lines of a well; returns the refined :class:`Well` and the wall RMS (px).
 
-    The walls are measured on rows (one per pixel by default) between 6 % and
+    The walls are measured on rows (one per pixel by default, ``window`` px each side
+    of the predicted wall; the trace uses 11) between 6 % and
     92 % of the well depth below the base's top surface (``z = -thickness / 2``;
     the longer the run of rows, the less the extrapolation to the rim amplifies
     their noise), fitted with clipped least squares (dust on a wall only
@@ -658,7 +659,7 @@ def find_chambers(view, *, thickness=None, min_width=20, chamber=None):
             depths.append(float(-(zz[j] + t * (zz[j + 1] - zz[j])) + top))
     depth = float(np.median(depths)) if len(depths) >= 5 else np.nan
     target = replace(target, depth=depth)
-    target, wall_rms = measure_walls(view, line, target, thickness=thickness, window=8.0)
+    target, wall_rms = measure_walls(view, line, target, thickness=thickness, window=11.0)
     if target is None:
         raise ValueError("the well walls could not be located")
     ax = target.centre
