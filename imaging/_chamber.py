@@ -259,7 +259,7 @@ def step_crossing(profiles, offsets, *, side=4, fit=0):
     fit : int
         0: the crossing between the two samples straddling the mid level; else
         of the least-squares line through the ``2 fit`` samples around them
-        (less noise: ``fit=3`` on the walls).
+        (less noise: ``fit=2`` on the walls).
 
     Returns
     -------

@@ -1657,9 +1657,9 @@ def dusty_rows(prof, offs, pos, gap, clip):
 
 
 #: a wall row's side levels: the median of 8 samples (4 px) at each end of its +-11 px window (7 px and more
-#: from the edge: unbiased under a 2.5 px blur); its crossing from a line through the 6 samples (3 px) around
-#: it, not the 2 straddling it (row scatter -35 %; small-chamber rim radius rms 0.183 -> 0.162 px, all nuisances)
-WALL_SIDE, WALL_FIT = 8, 3
+#: from the edge: no rim bias under a 2.5 px blur); its crossing from a line through the 4 samples (2 px)
+#: around it, not the 2 straddling it (row scatter -26 %, locked to the pixels by 0.012 px at most at 1 px blur)
+WALL_SIDE, WALL_FIT = 8, 2
 
 
 @njit(cache=True, nogil=True)
