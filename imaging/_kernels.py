@@ -13,7 +13,7 @@ does (named in its docstring, and checked against it in
 ``tests/imaging/test_kernels.py``, or ``test_geometry.py`` for the ellipse;
 ``dusty_rows`` was written compiled and has its own tests in
 ``test_wall_dust.py``) without the temporary arrays and the per-call overhead
-that dominate a frame's tracing time.  Compiled on first use (about 20 s once
+that dominate a frame's tracing time.  Compiled on first use (about 30 s once
 per machine) and cached on disk (``cache=True``).
 """
 
@@ -1443,7 +1443,11 @@ def direct_ellipse(x, y):
     for i in range(3):
         for j in range(3):
             T[i, j] = -T[i, j]
-    M0 = S1 + S2 @ T
+    M0 = S1.copy()  # S1 + S2 T (loops: numba's matmul would compile BLAS bindings, seconds)
+    for i in range(3):
+        for j in range(3):
+            for q in range(3):
+                M0[i, j] += S2[i, q] * T[q, j]
     M = np.empty((3, 3))
     for j in range(3):
         M[0, j] = M0[2, j] / 2.0
