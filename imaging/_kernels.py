@@ -37,7 +37,10 @@ def _sample_transects(frame, k, px, py, dx, dy, offsets, out):
     hm, wm = h - 1.0, w - 1.0
     flat = frame.ravel()
     omin = omax = offsets[0] if m else 0.0
+    finite = True
     for j in range(m):
+        if not np.isfinite(offsets[j]):
+            finite = False
         omin = min(omin, offsets[j])
         omax = max(omax, offsets[j])
     for i in range(n):
@@ -53,7 +56,7 @@ def _sample_transects(frame, k, px, py, dx, dy, offsets, out):
         # a transect whose ends lie inside the last pixel square needs no bounds checks (most of them)
         r_lo, r_hi = min(rs + omin * dr, rs + omax * dr), max(rs + omin * dr, rs + omax * dr)
         c_lo, c_hi = min(cs + omin * dc, cs + omax * dc), max(cs + omin * dc, cs + omax * dc)
-        if h > 1 and w > 1 and r_lo >= 1e-6 and c_lo >= 1e-6 and r_hi < hm - 1e-6 and c_hi < wm - 1e-6:
+        if finite and h > 1 and w > 1 and r_lo >= 1e-6 and c_lo >= 1e-6 and r_hi < hm - 1e-6 and c_hi < wm - 1e-6:
             for j in range(m):
                 r = rs + offsets[j] * dr
                 c = cs + offsets[j] * dc
@@ -463,7 +466,9 @@ def _step_crossing_rows(q, offsets, side, out, fit):
                 if den > 0:
                     c1 = (cnt * sxy - sx * sy) / den
                     c0 = (sy - c1 * sx) / cnt
-                    if c1 != 0.0 and (c1 > 0) == (row[jj + 1] > row[jj]):
+                    # the line must rise the straddling pair's way, by a quarter of its rise at least
+                    if (c1 > 0) == (row[jj + 1] > row[jj]) and abs(c1) * (offsets[j1] - offsets[j0]) >= 0.25 * abs(
+                            row[jj + 1] - row[jj]) and c1 != 0.0:
                         dx = (lev - c0) / c1
                         if abs(dx) <= 0.5 * (offsets[j1] - offsets[j0]):
                             out[0, i] = x_lin + dx
@@ -582,6 +587,8 @@ def running_percentile(x, q, size):
 
     A sorted window slid along ``x`` (the edge values repeated beyond the ends).
     """
+    if size < 1 or size % 2 == 0:
+        raise ValueError("running_percentile needs an odd window size")
     n = x.shape[0]
     out = np.empty(n)
     if n == 0:
@@ -624,7 +631,7 @@ def low_contrast_run(contrast, mask, ds, noise, q=80.0, max_win=151):
     """
     idx = np.flatnonzero(mask)
     m = idx.shape[0]
-    if m == 0:
+    if m == 0 or np.isnan(noise):  # np.maximum's nan threshold: no station is low
         return 0.0
     cd = np.empty(m)
     w = np.empty(m)
@@ -1281,6 +1288,8 @@ def extrapolated_curve(pu, pz, qu, qz):
     out = np.empty((n, 2))
     out[:, 0] = pu
     out[:, 1] = pz
+    if n == 0 or m == 0:
+        return out
     fp, fq = _arc_fractions(pu, pz), _arc_fractions(qu, qz)
     if not (fp[n - 1] > 0.0 and fq[m - 1] > 0.0):
         return out
@@ -1421,7 +1430,7 @@ def _null_vector3(A):
     return best, bn > 0.0
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")  # a zero denominator -> inf/nan (a failed fit), no raise
 def direct_ellipse(x, y):
     """Halir & Flusser's direct ellipse, all compiled: ``status, xc, yc, width, height, phi``.
 
@@ -1453,6 +1462,11 @@ def direct_ellipse(x, y):
         M[0, j] = M0[2, j] / 2.0
         M[1, j] = -M0[1, j]
         M[2, j] = M0[0, j] / 2.0
+    mnorm = 0.0
+    for i in range(3):
+        for j in range(3):
+            mnorm += M[i, j] ** 2
+    mnorm = np.sqrt(mnorm)
     # characteristic polynomial l^3 + A l^2 + B l + C
     A = -(M[0, 0] + M[1, 1] + M[2, 2])
     B = (M[0, 0] * M[1, 1] - M[0, 1] * M[1, 0] + M[0, 0] * M[2, 2] - M[0, 2] * M[2, 0]
@@ -1471,6 +1485,7 @@ def direct_ellipse(x, y):
     found = 0
     vec = np.zeros(3)
     E = np.empty((3, 3))
+    roots = np.empty(3)
     for kk in range(3):
         lam = rad * np.cos(phi0 - 2.0 * np.pi * kk / 3.0) - A / 3.0
         for _ in range(3):  # Newton polish on the cubic
@@ -1479,6 +1494,17 @@ def direct_ellipse(x, y):
             if d == 0.0:
                 break
             lam -= f / d
+        roots[kk] = lam
+    for kk in range(3):
+        lam = roots[kk]
+        # the root's error from the coefficients' rounding (each ~ eps |M|^k: cancellation in the trace and
+        # minors of a non-normal M), against its distance to the other roots: LAPACK decides when not tiny
+        al = abs(lam)
+        err = 1e-15 * (mnorm ** 3 + mnorm ** 2 * al + mnorm * al ** 2 + al ** 3) / abs(
+            (3.0 * lam + 2.0 * A) * lam + B)
+        gap = min(abs(lam - roots[(kk + 1) % 3]), abs(lam - roots[(kk + 2) % 3]))
+        if not err <= 1e-9 * gap:
+            return 2, np.nan, np.nan, np.nan, np.nan, np.nan
         for i in range(3):
             for j in range(3):
                 E[i, j] = M[i, j] - (lam if i == j else 0.0)

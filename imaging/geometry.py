@@ -276,7 +276,8 @@ def fit_ellipse(points, *, robust=False, residual_threshold=None, max_trials=200
         return EllipseFit(message=f"need at least 5 finite points for an ellipse, got {n}")
     model = _direct_ellipse(pts)
     if model is None:
-        model = measure.EllipseModel.from_estimate(pts)  # for skimage's own message
+        with np.errstate(all="ignore"):  # (a degenerate conic divides by zero in skimage's algebra)
+            model = measure.EllipseModel.from_estimate(pts)  # for skimage's own message
         if not model:
             return EllipseFit(message=f"ellipse fit failed: {model}")
     if not _proper(model):

@@ -110,7 +110,9 @@ def ref_step_crossing(profiles, offsets, *, side=4, fit=0):
         if f.sum() < 3:
             continue
         c1, c0 = np.polyfit(x[f] - pos[i], y[f], 1)
-        if c1 != 0 and (c1 > 0) == (q[i, jj[i] + 1] > q[i, jj[i]]) and abs((lev[i] - c0) / c1) <= 0.5 * (x[-1] - x[0]):
+        rise = q[i, jj[i] + 1] - q[i, jj[i]]
+        if (c1 != 0 and (c1 > 0) == (rise > 0) and abs(c1) * (x[-1] - x[0]) >= 0.25 * abs(rise)
+                and abs((lev[i] - c0) / c1) <= 0.5 * (x[-1] - x[0])):
             pos[i] += (lev[i] - c0) / c1
     return pos, b - a
 
@@ -160,9 +162,30 @@ def test_sample_transects_equals_map_coordinates(k, dtype):
     np.testing.assert_allclose(got[inside], want[inside], rtol=1e-12, atol=1e-9)
     far = (x < -1) | (x > w) | (y < -1) | (y > h)
     assert np.isnan(got[far]).all() and np.isnan(got[~inside]).all()
+    # a non-finite offset is nan at that sample only (never the unchecked path)
+    odd = sample_transects(frame, k, np.array([[w / 2, h / 2]]), np.array([[0.6, 0.8]]), np.array([-1.0, np.nan, 1.0]))
+    assert np.isnan(odd[0, 1]) and np.isfinite(odd[0, [0, 2]]).all()
     # exactly on the last row/column: the pixel value, not nan
     corner = sample_transects(frame, k, np.array([[w - 1.0, h - 1.0]]), np.array([[1.0, 0.0]]), np.zeros(1))
     assert corner[0, 0] == view.sample(np.array(w - 1.0), np.array(h - 1.0))
+
+
+@pytest.mark.parametrize("k", range(4))
+def test_sample_transects_inside_the_frame_equal_map_coordinates(k):
+    """Transects wholly inside the frame (the path without bounds checks), up to a hair from the last row/column."""
+    rng = np.random.default_rng(10 + k)
+    frame = (rng.random((120, 90)) * 60000).astype(np.uint16)
+    view = FrameView(frame, k)
+    h, w = view.shape
+    offs = np.arange(-10.0, 10.01, 0.5)
+    pts = np.c_[rng.uniform(11, w - 12, 300), rng.uniform(11, h - 12, 300)]
+    ang = rng.uniform(0, 2 * np.pi, 300)
+    d = np.c_[np.cos(ang), np.sin(ang)]
+    edge = np.array([[w - 1.0 - 1e-5, h / 2], [h / 2 * 0 + 1e-5, 1e-5]])  # ends just inside the last column / corner
+    pts, d = np.r_[pts, edge + [[-10.0, 0.0], [10.0, 0.0]]], np.r_[d, [[1.0, 0.0], [-1.0, 0.0]]]
+    got = sample_transects(frame, k, pts, d, offs)
+    want = view.sample(pts[:, :1] + offs[None, :] * d[:, :1], pts[:, 1:] + offs[None, :] * d[:, 1:])
+    np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-9)
 
 
 @pytest.mark.parametrize("seed", range(5))
@@ -340,6 +363,13 @@ def test_running_percentile_equals_scipy(size):
             np.testing.assert_array_equal(running_percentile(x, q, size), want)
 
 
+def test_running_percentile_refuses_an_even_window():
+    from osmobulge.imaging._kernels import running_percentile
+
+    with pytest.raises(ValueError, match="odd"):
+        running_percentile(np.arange(5.0), 80.0, 4)
+
+
 def test_low_contrast_run_equals_the_numpy_figure():
     from osmobulge.imaging._kernels import low_contrast_run
 
@@ -364,6 +394,7 @@ def test_low_contrast_run_equals_the_numpy_figure():
         assert low_contrast_run(con, dome, ds, 0.02) == pytest.approx(want, rel=1e-12, abs=0)
         if n >= 160:
             assert want > 0.05 * n * 0.9  # the gap is found (not a vacuous comparison)
+            assert low_contrast_run(con, dome, ds, np.nan) == 0.0  # np.maximum's nan threshold: nothing is low
 
 
 def test_nanmedian_equals_numpy():
@@ -463,6 +494,7 @@ def test_extrapolated_curve_equals_numpy():
         np.testing.assert_allclose(got, reference(p, q), rtol=0, atol=1e-9)
     flat = np.zeros((4, 2))
     assert (extrapolated_curve(*flat.T.copy(), *flat.T.copy()) == 0).all()
+    assert extrapolated_curve(np.zeros(0), np.zeros(0), *flat.T.copy()).shape == (0, 2)
 
 
 @pytest.mark.parametrize(("k", "sign"), [(0, 1.0), (1, -1.0), (3, 1.0)])

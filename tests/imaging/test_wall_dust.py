@@ -81,7 +81,7 @@ def test_compiled_wall_rows_equal_the_numpy_rows(seed):
         view = FrameView(fr, tracer.k)
         top = -0.5 * g.thickness
         zs = top - np.linspace(0.06, 0.92, int(np.clip(0.86 * g.well.depth, 8, 250))) * g.well.depth
-        offs = np.arange(-8.0, 8.0 + 1e-9, 0.5)
+        offs = np.arange(-11.0, 11.0 + 1e-9, 0.5)  # the trace's window
         for u0, slope in ((g.well.u_left, g.well.slope_left), (g.well.u_right, g.well.slope_right)):
             for du in (0.0, 2.5):  # on the wall and a little off it
                 d, nv = g.line.direction, g.line.normal
