@@ -42,6 +42,9 @@ from osmobulge.imaging._kernels import (
 __all__ = ["FrameView", "Line", "Well", "ChamberGeometry", "ROTATIONS", "detect_orientation", "find_chambers",
            "measure_line", "measure_walls", "band_edges", "step_crossing"]
 
+#: half-width (px) of the rows across a wall: side levels 7 px and more from the edge (see ``_kernels.WALL_SIDE``)
+WALL_WINDOW = 11.0
+
 #: np.rot90 count that turns each bulge direction into "up"
 ROTATIONS = {"up": 0, "right": 1, "down": 2, "left": 3}
 
@@ -458,7 +461,7 @@ def measure_walls(view, line, well, *, thickness, window, n_rows=None):
     """Sub-pixel wall lines of a well; returns the refined :class:`Well` and the wall RMS (px).
 
     The walls are measured on rows (one per pixel by default, ``window`` px each side
-    of the predicted wall; the trace uses 11) between 6 % and
+    of the predicted wall; the trace uses :data:`WALL_WINDOW`) between 6 % and
     92 % of the well depth below the base's top surface (``z = -thickness / 2``;
     the longer the run of rows, the less the extrapolation to the rim amplifies
     their noise), fitted with clipped least squares (dust on a wall only
@@ -659,7 +662,7 @@ def find_chambers(view, *, thickness=None, min_width=20, chamber=None):
             depths.append(float(-(zz[j] + t * (zz[j + 1] - zz[j])) + top))
     depth = float(np.median(depths)) if len(depths) >= 5 else np.nan
     target = replace(target, depth=depth)
-    target, wall_rms = measure_walls(view, line, target, thickness=thickness, window=11.0)
+    target, wall_rms = measure_walls(view, line, target, thickness=thickness, window=WALL_WINDOW)
     if target is None:
         raise ValueError("the well walls could not be located")
     ax = target.centre

@@ -174,7 +174,8 @@ def _direct_ellipse(pts):
     Compiled (:func:`~osmobulge.imaging._kernels.direct_ellipse`: the 3 x 3
     eigenproblem through its cubic, 10 us a fit); the numpy algebra
     (:func:`_direct_ellipse_numpy`) decides the cases that route cannot
-    (repeated roots, a singular scatter matrix).
+    (ill-conditioned or repeated roots: very eccentric ellipses; a singular
+    scatter matrix).
     """
     status, xc, yc, width, height, phi = direct_ellipse(np.ascontiguousarray(pts[:, 0], np.float64),
                                                         np.ascontiguousarray(pts[:, 1], np.float64))

@@ -49,6 +49,7 @@ from skimage.registration import phase_cross_correlation
 
 from osmobulge.imaging._chamber import (
     ROTATIONS,
+    WALL_WINDOW,
     ChamberGeometry,
     FrameView,
     _nanmedian,
@@ -439,7 +440,7 @@ class ChamberTracer:
             if not (dz < 6.0 and abs(con) > 0.5 * abs(g0.contrast)):
                 return None, drift
         well = self._coarse_walls(view, line, well)
-        well, wall_rms = measure_walls(view, line, well, thickness=g0.thickness, window=11.0)
+        well, wall_rms = measure_walls(view, line, well, thickness=g0.thickness, window=WALL_WINDOW)
         if well is None:
             return None, drift
         ax = well.centre

@@ -69,7 +69,7 @@ def test_rows_without_an_edge_are_not_dust_and_do_not_grow():
 @pytest.mark.parametrize("seed", [100, 101, 103])
 def test_compiled_wall_rows_equal_the_numpy_rows(seed):
     """The compiled rows of a wall fit (steps, sign and strength, dusty rows) are measure_walls' former numpy rows."""
-    from osmobulge.imaging._chamber import FrameView, _wall_rows_numpy
+    from osmobulge.imaging._chamber import WALL_WINDOW, FrameView, _wall_rows_numpy
     from osmobulge.imaging._kernels import wall_rows
 
     s = render_series(VT[[0, 8, 15]], nuisances=ALL.__class__(**{**ALL.__dict__, "dust_count": 60}), seed=seed,
@@ -81,7 +81,7 @@ def test_compiled_wall_rows_equal_the_numpy_rows(seed):
         view = FrameView(fr, tracer.k)
         top = -0.5 * g.thickness
         zs = top - np.linspace(0.06, 0.92, int(np.clip(0.86 * g.well.depth, 8, 250))) * g.well.depth
-        offs = np.arange(-11.0, 11.0 + 1e-9, 0.5)  # the trace's window
+        offs = np.arange(-WALL_WINDOW, WALL_WINDOW + 1e-9, 0.5)  # the trace's window
         for u0, slope in ((g.well.u_left, g.well.slope_left), (g.well.u_right, g.well.slope_right)):
             for du in (0.0, 2.5):  # on the wall and a little off it
                 d, nv = g.line.direction, g.line.normal
