@@ -26,8 +26,9 @@ __all__ = ["sample_transects", "ends_noise", "band_edges_rows", "step_crossing_r
            "viterbi_rows", "lsq_spline", "fill_rows_nanmedian", "nanmedian", "longest_run", "running_percentile",
            "low_contrast_run", "ellipse_distance_folded", "robust_profile_spline", "strongest_edge",
            "native_frame", "guide_transects", "revolution_halves", "clean_stations", "rim_bridge", "rim_zone",
-           "abs_percentile", "extrapolated_curve", "ellipse_scatter", "direct_ellipse", "ellipse_arc_volume",
-           "dusty_rows", "wall_rows", "ridge_rows", "block_mean", "signed_profiles", "compiled_on_disk"]
+           "abs_percentile", "extrapolated_curve", "ellipse_scatter", "conic_parameters", "direct_ellipse",
+           "ellipse_arc_volume", "dusty_rows", "wall_rows", "ridge_rows", "block_mean", "signed_profiles",
+           "compiled_on_disk"]
 
 
 @njit(cache=True, nogil=True)
@@ -1430,6 +1431,35 @@ def _null_vector3(A):
     return best, bn > 0.0
 
 
+@njit(cache=True, nogil=True, error_model="numpy")  # divisions by zero give inf/nan, as numpy
+def conic_parameters(a, b, c, d, f, g):
+    """Centre, semi-axes (major first) and angle of the conic ``a x^2 + b x y + c y^2 + d x + f y + g = 0``.
+
+    skimage's :class:`~skimage.measure.EllipseModel` conversion (Halir &
+    Flusser's coefficient vector to ``xc, yc, width, height, phi``, ``phi``
+    in ``[0, pi)``); nan for an axis whose square is negative (no ellipse),
+    inf/nan where a denominator vanishes.  Shared by both routes of the
+    direct ellipse fit.
+    """
+    b, d, f = b / 2.0, d / 2.0, f / 2.0
+    den = b * b - a * c
+    xc, yc = (c * d - b * f) / den, (a * f - b * d) / den
+    num = a * f * f + c * d * d + g * b * b - 2.0 * b * d * f - a * c * g
+    term = np.sqrt((a - c) ** 2 + 4.0 * b * b)
+    w2 = 2.0 * num / (den * (term - (a + c)))
+    h2 = 2.0 * num / (den * (-term - (a + c)))
+    width = np.sqrt(w2) if w2 >= 0.0 else np.nan
+    height = np.sqrt(h2) if h2 >= 0.0 else np.nan
+    phi = 0.5 * np.arctan((2.0 * b) / (a - c))
+    if a > c:
+        phi += 0.5 * np.pi
+    if width < height:
+        width, height = height, width
+        phi += np.pi / 2
+    phi %= np.pi
+    return xc, yc, width, height, phi
+
+
 @njit(cache=True, nogil=True, error_model="numpy")  # a zero denominator -> inf/nan (a failed fit), no raise
 def direct_ellipse(x, y):
     """Halir & Flusser's direct ellipse, all compiled: ``status, xc, yc, width, height, phi``.
@@ -1520,25 +1550,8 @@ def direct_ellipse(x, y):
     d_ = T[0, 0] * a + T[0, 1] * b + T[0, 2] * c
     f = T[1, 0] * a + T[1, 1] * b + T[1, 2] * c
     g = T[2, 0] * a + T[2, 1] * b + T[2, 2] * c
-    b, d_, f = b / 2.0, d_ / 2.0, f / 2.0
-    den = b * b - a * c
-    xc, yc = (c * d_ - b * f) / den, (a * f - b * d_) / den
-    num = a * f * f + c * d_ * d_ + g * b * b - 2.0 * b * d_ * f - a * c * g
-    term = np.sqrt((a - c) ** 2 + 4.0 * b * b)
-    w2 = 2.0 * num / (den * (term - (a + c)))
-    h2 = 2.0 * num / (den * (-term - (a + c)))
-    width = np.sqrt(w2) if w2 >= 0.0 else np.nan
-    height = np.sqrt(h2) if h2 >= 0.0 else np.nan
-    if a == c:  # a circle's angle (numpy: an arctan of +-inf, or nan -> 0)
-        return 2, np.nan, np.nan, np.nan, np.nan, np.nan
-    phi = 0.5 * np.arctan((2.0 * b) / (a - c))
-    if a > c:
-        phi += 0.5 * np.pi
-    if width < height:
-        width, height = height, width
-        phi += np.pi / 2
-    phi %= np.pi
-    if not (np.isfinite(xc) and np.isfinite(yc) and np.isfinite(phi)):
+    xc, yc, width, height, phi = conic_parameters(a, b, c, d_, f, g)
+    if not (np.isfinite(xc) and np.isfinite(yc) and np.isfinite(phi)):  # (numpy maps nan/inf to numbers)
         return 2, np.nan, np.nan, np.nan, np.nan, np.nan
     if not (np.isfinite(width * height) and width > 0 and height > 0):
         return 1, np.nan, np.nan, np.nan, np.nan, np.nan

@@ -28,6 +28,7 @@ from scipy import interpolate
 from skimage import measure
 
 from osmobulge.imaging._kernels import (
+    conic_parameters,
     direct_ellipse,
     ellipse_distance_folded,
     ellipse_scatter,
@@ -208,22 +209,7 @@ def _direct_ellipse_numpy(pts):
     a1 = a1[:, 0]
     a, b, c = a1.real
     d_, f, g = (T @ a1).real
-    b, d_, f = b / 2.0, d_ / 2.0, f / 2.0
-    den = b * b - a * c
-    x0, y0 = (c * d_ - b * f) / den, (a * f - b * d_) / den
-    num = a * f * f + c * d_ * d_ + g * b * b - 2.0 * b * d_ * f - a * c * g
-    term = np.sqrt((a - c) ** 2 + 4.0 * b * b)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        width = np.sqrt(2.0 * num / (den * (term - (a + c))))
-        height = np.sqrt(2.0 * num / (den * (-term - (a + c))))
-        phi = 0.5 * np.arctan((2.0 * b) / (a - c))
-    if a > c:
-        phi += 0.5 * np.pi
-    if width < height:
-        width, height = height, width
-        phi += np.pi / 2
-    phi %= np.pi
-    x0, y0, width, height, phi = np.nan_to_num([x0, y0, width, height, phi])
+    x0, y0, width, height, phi = np.nan_to_num(conic_parameters(*(float(v) for v in (a, b, c, d_, f, g))))
     if not (np.isfinite(width * height) and width > 0 and height > 0):
         return None  # a degenerate conic (a constraint value at rounding level: e.g. points on two lines)
     return _Conic(np.array([x0, y0]) * scale + origin, np.array([width, height]) * scale, float(phi))
