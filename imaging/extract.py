@@ -302,7 +302,7 @@ def extract(
                 for run in runs:
                     run.step(i, frame, p, errors)
             if bar is not None:
-                bar.update(task, advance=1, description="extracting")
+                bar.update(task, advance=1, **({"description": "extracting"} if i == 0 else {}))  # compiled now
     finally:
         if bar is not None:
             bar.stop()

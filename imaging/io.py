@@ -833,9 +833,6 @@ class FrameSeries(Sequence):
             k = int(i)
         except TypeError:
             raise TypeError(f"frame index must be an int or a slice, got {type(i).__name__}") from None
-        n = len(self)
-        if not -n <= k < n:
-            raise IndexError(f"frame index {k} out of range for a series of {n} frames")
         return self._read(k, True)
 
     def peek(self, i):
@@ -846,12 +843,12 @@ class FrameSeries(Sequence):
         percent of each frame), and it is valid only while the series is open.
         Other sources return their copy as ``series[i]`` does.
         """
-        k = int(i)
-        if not -len(self) <= k < len(self):
-            raise IndexError(f"frame index {k} out of range for a series of {len(self)} frames")
-        return self._read(k, False)
+        return self._read(int(i), False)
 
     def _read(self, k, copy):
+        n = len(self)
+        if not -n <= k < n:
+            raise IndexError(f"frame index {k} out of range for a series of {n} frames")
         j = int(self._index[k])
         try:
             return self._b.read(j, copy=copy)

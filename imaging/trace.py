@@ -204,13 +204,6 @@ class FrameTrace:
 
 
 # ---------------------------------------------------------------------------------- helpers
-def _sustained_min(x, n):
-    """Smallest value of a running maximum over ``n`` samples (a gap sustained over n stations)."""
-    if len(x) < n:
-        return float(np.max(x)) if len(x) else np.inf
-    return float(np.min(ndi.maximum_filter1d(x, n, mode="nearest")[n // 2 : len(x) - n // 2]))
-
-
 # ---------------------------------------------------------------------------------- tracer
 class ChamberTracer:
     """Follows one chamber through a series, one frame at a time (constant memory).
