@@ -22,13 +22,13 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["sample_transects", "ends_noise", "band_edges_rows", "step_crossing_rows", "robust_line",
-           "viterbi_rows", "lsq_spline", "fill_rows_nanmedian", "nanmedian", "longest_run", "running_percentile",
-           "low_contrast_run", "ellipse_distance_folded", "robust_profile_spline", "strongest_edge",
-           "native_frame", "guide_transects", "revolution_halves", "clean_stations", "rim_bridge", "rim_zone",
-           "abs_percentile", "extrapolated_curve", "ellipse_scatter", "conic_parameters", "direct_ellipse",
-           "ellipse_arc_volume", "dusty_rows", "wall_rows", "ridge_rows", "block_mean", "signed_profiles",
-           "compiled_on_disk"]
+__all__ = ["sample_transects", "ends_noise", "band_edges_rows", "step_crossing_rows", "robust_line", "viterbi_rows",
+           "lsq_spline", "fill_rows_nanmedian", "nanmedian", "longest_run", "running_percentile", "low_contrast_run",
+           "ellipse_distance_folded", "robust_profile_spline", "strongest_edge", "native_frame", "guide_transects",
+           "revolution_halves", "clean_stations", "rim_bridge", "rim_zone", "abs_percentile", "extrapolated_curve",
+           "rim_contact", "curve_extent", "ellipse_scatter", "conic_parameters", "direct_ellipse",
+           "ellipse_arc_volume", "profile_ellipse", "arc_resample", "dusty_rows", "wall_rows", "ridge_rows",
+           "block_mean", "signed_profiles", "compiled_on_disk"]
 
 
 @njit(cache=True, nogil=True)
@@ -1338,6 +1338,73 @@ def abs_percentile(x, mask, q):
 
 
 @njit(cache=True, nogil=True)
+def rim_contact(frame, k, x0, y0, d0, d1, n0, n1, R, zw, fracs, far_left, far_right):
+    """The tracer's rim contact figure (``ChamberTracer._figures``), one call for both sides.
+
+    Per side ``sgn`` (-1 left, +1 right): bilinear samples (view rotated by
+    ``k``) of the band at ``u = sgn (R + fracs R)``, ``z = 0``, of the band far
+    out at ``u = far``, ``z = 0`` and of the water above it at ``z = zw`` (view
+    point ``(x0, y0) + u (d0, d1) + z (n0, n1)``, as ``Line.point``); with the
+    nan medians ``band``, ``band_far``, ``water`` the side's figure is
+    ``(water - band) / (water - band_far)`` (nan when that denominator is 0 or
+    not finite).  Returns ``min(left, right)`` as Python's ``min`` gives it
+    (the left one unless the right one is smaller).
+    """
+    nb = fracs.shape[0]
+    zero = np.zeros(1)
+    out = np.empty(2)
+    for side in range(2):
+        sgn = -1.0 if side == 0 else 1.0
+        far = far_left if side == 0 else far_right
+        nf = far.shape[0]
+        m = nb + 2 * nf
+        px = np.empty(m)
+        py = np.empty(m)
+        for i in range(nb):
+            u = sgn * (R + fracs[i] * R)
+            px[i] = x0 + u * d0 + 0.0 * n0
+            py[i] = y0 + u * d1 + 0.0 * n1
+        for i in range(nf):
+            px[nb + i] = x0 + far[i] * d0 + 0.0 * n0
+            py[nb + i] = y0 + far[i] * d1 + 0.0 * n1
+            px[nb + nf + i] = x0 + far[i] * d0 + zw * n0
+            py[nb + nf + i] = y0 + far[i] * d1 + zw * n1
+        zs = np.zeros(m)
+        v = np.empty((m, 1))
+        _sample_transects(frame, k, px, py, zs, zs, zero, v)
+        band = _nanmedian_flat(v[:nb, 0].copy())
+        band_far = _nanmedian_flat(v[nb:nb + nf, 0].copy())
+        water = _nanmedian_flat(v[nb + nf:, 0].copy())
+        den = water - band_far
+        out[side] = (water - band) / den if np.isfinite(den) and abs(den) > 0 else np.nan
+    return out[1] if out[1] < out[0] else out[0]
+
+
+@njit(cache=True, nogil=True)
+def curve_extent(u, z, x0, y0, d0, d1, n0, n1):
+    """``max(|u|)`` and the view box of ``Line.point(u, z)``: ``(max|u|, x.min(), x.max(), y.min())``.
+
+    The tracer's check whether another bulge could reach the dome
+    (``ChamberTracer._neighbour_possible``); nan when ``u`` is empty.
+    """
+    n = u.shape[0]
+    if n == 0:
+        return np.nan, np.nan, np.nan, np.nan
+    umax = abs(u[0])
+    x = x0 + u[0] * d0 + z[0] * n0
+    xmin = xmax = x
+    ymin = y0 + u[0] * d1 + z[0] * n1
+    for i in range(1, n):
+        umax = max(umax, abs(u[i]))
+        x = x0 + u[i] * d0 + z[i] * n0
+        y = y0 + u[i] * d1 + z[i] * n1
+        xmin = min(xmin, x)
+        xmax = max(xmax, x)
+        ymin = min(ymin, y)
+    return umax, xmin, xmax, ymin
+
+
+@njit(cache=True, nogil=True)
 def ellipse_scatter(x, y):
     """Centroid, scale and the scatter matrices of Halir & Flusser's direct ellipse fit (normalised points).
 
@@ -1598,6 +1665,89 @@ def ellipse_arc_volume(xc, yc, a, b, theta, n):
         return np.nan
     return 0.5 * (meas[0] + meas[1])
 
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def profile_ellipse(x, y, n_arc):
+    """The extraction's ellipse description of a profile in one call: ``status, a, b, rms, volume``.
+
+    :func:`osmobulge.imaging.geometry.fit_ellipse` of the finite points (the
+    compiled :func:`direct_ellipse`; its semi-axes ``a, b`` and the RMS of the
+    exact geometric distances, :func:`ellipse_distance_folded`) and
+    :func:`ellipse_arc_volume` of the arc above z = 0 (``n_arc`` points).
+    ``status`` 0: done; else (fewer than 5 points, no ellipse, or a case the
+    compiled route cannot decide) the caller asks ``fit_ellipse`` itself.
+    """
+    n = x.shape[0]
+    m = 0
+    for i in range(n):
+        if np.isfinite(x[i]) and np.isfinite(y[i]):
+            m += 1
+    if m < 5:
+        return 1, np.nan, np.nan, np.nan, np.nan
+    xs = np.empty(m)
+    ys = np.empty(m)
+    j = 0
+    for i in range(n):
+        if np.isfinite(x[i]) and np.isfinite(y[i]):
+            xs[j] = x[i]
+            ys[j] = y[i]
+            j += 1
+    status, xc, yc, a, b, th = direct_ellipse(xs, ys)
+    if status != 0:
+        return status, np.nan, np.nan, np.nan, np.nan
+    if not (np.isfinite(a) and np.isfinite(b) and a > 0 and b > 0):
+        return 1, np.nan, np.nan, np.nan, np.nan
+    # geometry.ellipse_distance: into the ellipse's frame, folded into the first quadrant, major axis first
+    c, s_ = np.cos(th), np.sin(th)
+    fx = np.empty(m)
+    fy = np.empty(m)
+    for i in range(m):
+        dx, dy = xs[i] - xc, ys[i] - yc
+        fx[i] = abs(dx * c + dy * s_)
+        fy[i] = abs(-dx * s_ + dy * c)
+    if a < b:
+        res = ellipse_distance_folded(fy, fx, b, a, 60)
+    else:
+        res = ellipse_distance_folded(fx, fy, a, b, 60)
+    rms = np.sqrt(np.mean(res * res))
+    return 0, a, b, rms, ellipse_arc_volume(xc, yc, a, b, th, n_arc)
+
+
+@njit(cache=True, nogil=True)
+def arc_resample(u, z, n):
+    """A polyline resampled at ``n`` points evenly spaced in arc length: ``length, uu, zz``.
+
+    ``sc = concatenate(([0], cumsum(hypot(diff(u), diff(z)))))``;
+    ``si = linspace(0, sc[-1], n)``; ``uu, zz = interp(si, sc, u), interp(si, sc, z)``
+    (numpy's interpolation rule; ``u`` of at least 2 points with increasing ``sc``).
+    """
+    m = u.shape[0]
+    sc = np.empty(m)
+    sc[0] = 0.0
+    for i in range(1, m):
+        sc[i] = sc[i - 1] + np.hypot(u[i] - u[i - 1], z[i] - z[i - 1])
+    length = sc[m - 1]
+    uu = np.empty(n)
+    zz = np.empty(n)
+    step = length / (n - 1) if n > 1 else 0.0
+    j = 0
+    for i in range(n):
+        x = i * step if step != 0.0 else i / (n - 1) * length
+        if i == n - 1 and n > 1:
+            x = length
+        if x >= length:
+            uu[i], zz[i] = u[m - 1], z[m - 1]
+            continue
+        while j < m - 2 and sc[j + 1] <= x:
+            j += 1
+        if sc[j] == x:
+            uu[i], zz[i] = u[j], z[j]
+            continue
+        h = sc[j + 1] - sc[j]
+        uu[i] = (u[j + 1] - u[j]) / h * (x - sc[j]) + u[j]
+        zz[i] = (z[j + 1] - z[j]) / h * (x - sc[j]) + z[j]
+    return length, uu, zz
 
 
 @njit(cache=True, nogil=True)

@@ -28,7 +28,7 @@ import xarray as xr
 
 from osmobulge import __version__
 from osmobulge.imaging._chamber import FrameView
-from osmobulge.imaging._kernels import compiled_on_disk, ellipse_arc_volume
+from osmobulge.imaging._kernels import arc_resample, compiled_on_disk, ellipse_arc_volume, profile_ellipse
 from osmobulge.imaging.geometry import fit_ellipse
 from osmobulge.imaging.trace import FLAGS, ChamberTracer, TraceSettings
 
@@ -455,11 +455,9 @@ def _store(i, res, run, frame, p):
     if np.isfinite(scal["neighbour_gap"][i]):
         scal["neighbour_gap"][i] *= p
     # the profile on an even arc-length grid
-    seg = np.hypot(np.diff(res.u), np.diff(res.z))
-    sc = np.concatenate(([0.0], np.cumsum(seg)))
-    plen[i] = sc[-1] * p
-    si = np.linspace(0.0, sc[-1], n_profile)
-    uu, zz = np.interp(si, sc, res.u), np.interp(si, sc, res.z)
+    length, uu, zz = arc_resample(np.ascontiguousarray(res.u, np.float64), np.ascontiguousarray(res.z, np.float64),
+                                  int(n_profile))
+    plen[i] = length * p
     px[i], pz[i] = uu * p, zz * p
     vp = g.line.point(uu, zz)
     rr, cc = view.to_frame(vp[:, 0], vp[:, 1])
@@ -469,11 +467,16 @@ def _store(i, res, run, frame, p):
     pts_z = res.points_z if len(res.points_z) >= 5 else res.z
     sel = np.linspace(0, len(pts_u) - 1, min(len(pts_u), 200)).astype(int)
     if np.ptp(pts_z) > 1.0:
-        ell = fit_ellipse(np.column_stack((pts_u[sel], pts_z[sel])))
-        if ell:
-            scal["ellipse_a"][i], scal["ellipse_b"][i] = (x * p for x in ell.semi_axes)
-            scal["ellipse_rms"][i] = ell.rms * p
-            scal["volume_ellipse"][i] = _ellipse_volume(ell) * p**3
+        eu, ez = np.ascontiguousarray(pts_u[sel], np.float64), np.ascontiguousarray(pts_z[sel], np.float64)
+        status, a, b, rms, vol = profile_ellipse(eu, ez, 721)  # compiled: fit_ellipse and _ellipse_volume
+        if status != 0:  # too few points, no ellipse, or a case only the numpy algebra decides
+            ell = fit_ellipse(np.column_stack((eu, ez)))
+            if ell:
+                (a, b), rms, vol, status = ell.semi_axes, ell.rms, _ellipse_volume(ell), 0
+        if status == 0:
+            scal["ellipse_a"][i], scal["ellipse_b"][i] = a * p, b * p
+            scal["ellipse_rms"][i] = rms * p
+            scal["volume_ellipse"][i] = vol * p**3
 
 
 def _ellipse_volume(ell):

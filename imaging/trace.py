@@ -62,6 +62,7 @@ from osmobulge.imaging._chamber import (
 from osmobulge.imaging._kernels import (
     abs_percentile,
     clean_stations,
+    curve_extent,
     ends_noise,
     extrapolated_curve,
     guide_transects,
@@ -69,9 +70,9 @@ from osmobulge.imaging._kernels import (
     lsq_spline,
     native_frame,
     rim_bridge,
+    rim_contact,
     rim_zone,
     robust_profile_spline,
-    sample_transects,
     strongest_edge,
 )
 from osmobulge.imaging._normals import resample_polyline, viterbi_path
@@ -82,7 +83,7 @@ __all__ = ["TraceSettings", "FrameTrace", "ChamberTracer", "FLAGS", "trace_serie
 #: quality flags, in order of precedence
 FLAGS = ("ok", "no_membrane", "delaminated", "fractured", "touching", "poor_fit")
 
-_AT_POINT = np.zeros(1)  # a transect of one sample: bilinear samples at the points themselves
+_RIM_FRACTIONS = np.linspace(0.02, 0.1, 9)  # rim contact: the band just outside the rim, R (1 + f) from the axis
 
 
 @dataclass(frozen=True)
@@ -827,20 +828,12 @@ class ChamberTracer:
                                                    float(tr.get("noise", 0.0))) / max(g.thickness, 1.0))
         # rim contact: membrane on the flat line just outside each rim, as a fraction of the
         # band's contrast against the water on the nearest flat columns (1 = on the surface, 0 = lifted)
-        uu = R + np.linspace(0.02, 0.1, 9) * R
-        zw = 0.5 * g.thickness + 3.0 * self.blur + 4.0
-        vals = []
-        # one sampling call, per side: the band at the rim, the band far out and the water above it
-        uz = [(u_, np.full(len(u_), z_)) for sgn, far in zip((-1.0, 1.0), self._rim_contact_u, strict=True)
-              for u_, z_ in ((sgn * uu, 0.0), (far, 0.0), (far, zw))]
-        pts = g.line.point(np.concatenate([q[0] for q in uz]), np.concatenate([q[1] for q in uz]))
-        v = np.split(sample_transects(view.frame, view.k, pts, np.zeros_like(pts), _AT_POINT)[:, 0],
-                     np.cumsum([len(q[0]) for q in uz])[:-1])
-        for k in (0, 3):
-            band, band_far, water = (_nanmedian(x) for x in v[k:k + 3])
-            den = water - band_far
-            vals.append(float((water - band) / den) if np.isfinite(den) and abs(den) > 0 else np.nan)
-        fig["rim_contact"] = float(min(vals))
+        # (compiled: the band at the rim, the band far out and the water above it, both sides in one call)
+        d, nv = g.line.direction, g.line.normal
+        fig["rim_contact"] = float(rim_contact(
+            view.frame, view.k, float(g.line.x0), float(g.line.y0), float(d[0]), float(d[1]), float(nv[0]),
+            float(nv[1]), float(R), 0.5 * g.thickness + 3.0 * self.blur + 4.0, _RIM_FRACTIONS,
+            *self._rim_contact_u))
         # sustained gap to another membrane beyond the band, both sides of the dome
         fig["neighbour_gap"] = self._neighbour_gap(view, g, tr) if self._neighbour_possible(view, g, tr) else np.inf
         fig["residual_rms"] = tr["residual_rms"]
@@ -848,13 +841,16 @@ class ChamberTracer:
 
     def _neighbour_possible(self, view, g, tr):
         """Could another bulge reach the dome?  A well within reach, or the dome near the field's edge."""
-        reach = float(np.max(np.abs(tr["u"]))) + 2.5 * g.rim_radius
+        d, nv = g.line.direction, g.line.normal
+        umax, xmin, xmax, ymin = curve_extent(np.ascontiguousarray(tr["u"], np.float64),
+                                              np.ascontiguousarray(tr["z"], np.float64), float(g.line.x0),
+                                              float(g.line.y0), float(d[0]), float(d[1]), float(nv[0]), float(nv[1]))
+        reach = umax + 2.5 * g.rim_radius
         if any(min(abs(wl.u_left), abs(wl.u_right)) < reach for wl in g.others):
             return True
-        pts = g.line.point(tr["u"], tr["z"])
         h, w = view.shape
         margin = 0.5 * g.rim_radius
-        return bool(pts[:, 0].min() < margin or pts[:, 0].max() > w - margin or pts[:, 1].min() < margin)
+        return bool(xmin < margin or xmax > w - margin or ymin < margin)
 
     def _neighbour_gap(self, view, g, tr):
         """Gap (px) between the dome's band and the nearest *other* long membrane (a neighbour's bulge).

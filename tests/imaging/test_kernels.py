@@ -755,3 +755,109 @@ def test_compiled_on_disk_sees_a_missing_cache(monkeypatch, tmp_path):
     assert K.compiled_on_disk() is True
     monkeypatch.setattr(K.dusty_rows._cache._cache_file, "_index_path", str(tmp_path / "missing.nbi"))
     assert K.compiled_on_disk() is False
+
+
+def _ref_rim_contact(view, line, R, zw, far_left, far_right):
+    """The former rim contact figure of ``ChamberTracer._figures`` (numpy)."""
+    from osmobulge.imaging._chamber import _nanmedian
+
+    uu = R + np.linspace(0.02, 0.1, 9) * R
+    uz = [(u_, np.full(len(u_), z_)) for sgn, far in zip((-1.0, 1.0), (far_left, far_right), strict=True)
+          for u_, z_ in ((sgn * uu, 0.0), (far, 0.0), (far, zw))]
+    pts = line.point(np.concatenate([q[0] for q in uz]), np.concatenate([q[1] for q in uz]))
+    v = np.split(sample_transects(view.frame, view.k, pts, np.zeros_like(pts), np.zeros(1))[:, 0],
+                 np.cumsum([len(q[0]) for q in uz])[:-1])
+    vals = []
+    for k in (0, 3):
+        band, band_far, water = (_nanmedian(x) for x in v[k:k + 3])
+        den = water - band_far
+        vals.append(float((water - band) / den) if np.isfinite(den) and abs(den) > 0 else np.nan)
+    return float(min(vals))
+
+
+@pytest.mark.parametrize("k", [0, 1, 2, 3])
+def test_rim_contact_equals_numpy_reference(k):
+    from osmobulge.imaging._chamber import Line
+    from osmobulge.imaging._kernels import rim_contact
+    from osmobulge.imaging.trace import _RIM_FRACTIONS
+
+    rng = np.random.default_rng(k)
+    frame = (rng.random((90, 120)) * 4000).astype(np.uint16)
+    view = FrameView(frame, k)
+    h, w = view.shape
+    for trial in range(40):
+        line = Line(w / 2 + rng.normal(0, 5), h / 2 + rng.normal(0, 5), rng.normal(0, 0.05))
+        R = rng.uniform(5, 30)
+        # far columns: inside the view, or some (the last trials all) outside it -- nan medians, nan figures
+        spread = 0.45 * w if trial < 30 else 3.0 * w
+        far_l, far_r = -rng.uniform(R, spread, 15), rng.uniform(R, spread, 11)
+        if trial >= 35:  # the left side wholly outside: nan on the left, Python's min keeps it
+            far_l = -rng.uniform(3.0 * w, 4.0 * w, 15)
+        zw = rng.uniform(3, 12)
+        d, nv = line.direction, line.normal
+        got = rim_contact(view.frame, view.k, line.x0, line.y0, d[0], d[1], nv[0], nv[1], R, zw, _RIM_FRACTIONS,
+                          far_l, far_r)
+        want = _ref_rim_contact(view, line, R, zw, far_l, far_r)
+        assert (np.isnan(got) and np.isnan(want)) or got == pytest.approx(want, rel=1e-12, abs=1e-15)
+    # a flat field: the water and the band far out agree, the figure is nan (no contrast to refer to)
+    flat = FrameView(np.full((60, 60), 7, np.uint16), k)
+    line = Line(30.0, 30.0, 0.0)
+    args = (line.x0, line.y0, *line.direction, *line.normal, 10.0, 5.0, _RIM_FRACTIONS, -np.arange(12.0, 20.0),
+            np.arange(12.0, 20.0))
+    assert np.isnan(rim_contact(flat.frame, flat.k, *args))
+
+
+def test_curve_extent_equals_numpy():
+    from osmobulge.imaging._chamber import Line
+    from osmobulge.imaging._kernels import curve_extent
+
+    rng = np.random.default_rng(3)
+    for n in (1, 2, 50):
+        u, z = rng.normal(0, 40, n), rng.uniform(-2, 60, n)
+        line = Line(*rng.uniform(100, 200, 2), rng.normal(0, 0.1))
+        pts = line.point(u, z)
+        got = curve_extent(u, z, line.x0, line.y0, *line.direction, *line.normal)
+        assert got == (np.max(np.abs(u)), pts[:, 0].min(), pts[:, 0].max(), pts[:, 1].min())
+    assert all(np.isnan(curve_extent(np.zeros(0), np.zeros(0), 0.0, 0.0, 1.0, 0.0, 0.0, -1.0)))
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_profile_ellipse_equals_fit_ellipse_and_its_volume(seed):
+    from osmobulge.imaging._kernels import profile_ellipse
+    from osmobulge.imaging.extract import _ellipse_volume
+    from osmobulge.imaging.geometry import fit_ellipse
+
+    rng = np.random.default_rng(seed)
+    for trial in range(30):
+        a, b = rng.uniform(20, 200), rng.uniform(20, 200)
+        t = np.linspace(rng.uniform(-0.5, 0.3), np.pi - rng.uniform(-0.5, 0.3), int(rng.integers(6, 300)))
+        th = rng.normal(0, 0.2)
+        x = a * np.cos(t) * np.cos(th) - b * np.sin(t) * np.sin(th) + rng.normal(0, 3)
+        y = a * np.cos(t) * np.sin(th) + b * np.sin(t) * np.cos(th) - rng.uniform(0, 0.6) * b
+        x, y = x + rng.normal(0, 0.4, x.size), y + rng.normal(0, 0.4, x.size)
+        if trial % 5 == 0:
+            x[::7] = np.nan  # non-finite points are dropped, as fit_ellipse drops them
+        ell = fit_ellipse(np.c_[x, y])
+        status, ga, gb, grms, gvol = profile_ellipse(x, y, 721)
+        assert status == 0 and ell
+        np.testing.assert_allclose([ga, gb, grms], [*ell.semi_axes, ell.rms], rtol=1e-12)
+        want = _ellipse_volume(ell)
+        assert (np.isnan(gvol) and np.isnan(want)) or gvol == pytest.approx(want, rel=1e-12)
+    # what the compiled route does not decide goes back to fit_ellipse: too few points, collinear points
+    assert profile_ellipse(np.arange(4.0), np.arange(4.0), 721)[0] != 0
+    assert profile_ellipse(np.arange(10.0), 2.0 * np.arange(10.0), 721)[0] != 0
+    assert not fit_ellipse(np.c_[np.arange(10.0), 2.0 * np.arange(10.0)])
+
+
+def test_arc_resample_equals_numpy_interp():
+    from osmobulge.imaging._kernels import arc_resample
+
+    rng = np.random.default_rng(0)
+    for m, n in ((2, 2), (2, 401), (57, 401), (900, 401), (300, 7)):
+        u, z = np.cumsum(rng.uniform(0.2, 1.5, m)), np.cumsum(rng.normal(0, 1, m))
+        sc = np.concatenate(([0.0], np.cumsum(np.hypot(np.diff(u), np.diff(z)))))
+        si = np.linspace(0.0, sc[-1], n)
+        length, uu, zz = arc_resample(u, z, n)
+        assert length == sc[-1]
+        np.testing.assert_array_equal(uu, np.interp(si, sc, u))
+        np.testing.assert_array_equal(zz, np.interp(si, sc, z))
