@@ -26,7 +26,7 @@ __all__ = ["sample_transects", "ends_noise", "band_edges_rows", "step_crossing_r
            "lsq_spline", "fill_rows_nanmedian", "nanmedian", "longest_run", "running_percentile", "low_contrast_run",
            "ellipse_distance_folded", "robust_profile_spline", "strongest_edge", "native_frame", "guide_transects",
            "revolution_halves", "clean_stations", "rim_bridge", "rim_zone", "abs_percentile", "extrapolated_curve",
-           "rim_contact", "curve_extent", "ellipse_scatter", "conic_parameters", "direct_ellipse",
+           "rim_contact", "curve_extent", "clear_of_curve", "ellipse_scatter", "conic_parameters", "direct_ellipse",
            "ellipse_arc_volume", "profile_ellipse", "arc_resample", "dusty_rows", "wall_rows", "ridge_rows",
            "block_mean", "signed_profiles", "compiled_on_disk"]
 
@@ -1378,6 +1378,41 @@ def rim_contact(frame, k, x0, y0, d0, d1, n0, n1, R, zw, fracs, far_left, far_ri
         den = water - band_far
         out[side] = (water - band) / den if np.isfinite(den) and abs(den) > 0 else np.nan
     return out[1] if out[1] < out[0] else out[0]
+
+
+@njit(cache=True, nogil=True)
+def clear_of_curve(us, u, z, zmax, gap):
+    """Columns ``us`` farther than ``gap`` (along u) from every curve point below ``zmax``: a mask.
+
+    The tracer's flat-line columns without the last dome's overhang
+    (``ChamberTracer._geometry_at``): ``lu = sort(u[z < zmax])``, the nearest
+    of ``lu`` to each column through ``searchsorted``; all True when no point
+    is that low.
+    """
+    n = u.shape[0]
+    m = 0
+    for i in range(n):
+        if z[i] < zmax:
+            m += 1
+    out = np.ones(us.shape[0], np.bool_)
+    if m == 0:
+        return out
+    lu = np.empty(m)
+    j = 0
+    for i in range(n):
+        if z[i] < zmax:
+            lu[j] = u[i]
+            j += 1
+    lu.sort()
+    for i in range(us.shape[0]):
+        k = np.searchsorted(lu, us[i])
+        d = np.inf
+        if k > 0:
+            d = abs(us[i] - lu[k - 1])
+        if k < m:
+            d = min(d, abs(us[i] - lu[k]))
+        out[i] = d > gap
+    return out
 
 
 @njit(cache=True, nogil=True)

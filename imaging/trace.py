@@ -62,6 +62,7 @@ from osmobulge.imaging._chamber import (
 from osmobulge.imaging._kernels import (
     abs_percentile,
     clean_stations,
+    clear_of_curve,
     curve_extent,
     ends_noise,
     extrapolated_curve,
@@ -417,14 +418,10 @@ class ChamberTracer:
         us = self._flat_u
         if self.prev is not None and len(self.prev.u):
             # skip columns where the last dome (its overhang) comes down into the search window
-            low = self.prev.z < 0.5 * g0.thickness + win + 6.0
-            if low.any():
-                lu = np.sort(self.prev.u[low])
-                j = np.searchsorted(lu, us)
-                nl = len(lu) - 1
-                du = np.minimum(np.abs(us - lu[np.clip(j - 1, 0, nl)]), np.abs(us - lu[np.clip(j, 0, nl)]))
-                if (du > 6.0).sum() >= 12:
-                    us = us[du > 6.0]
+            clear = clear_of_curve(us, np.ascontiguousarray(self.prev.u, np.float64),
+                                   np.ascontiguousarray(self.prev.z, np.float64), 0.5 * g0.thickness + win + 6.0, 6.0)
+            if clear.sum() >= 12:
+                us = us[clear]
         predicted = line
         line, thick, con, rms, inl = measure_line(view, line, us, polarity=g0.polarity,
                                                   thickness=g0.thickness, window=win)
@@ -799,7 +796,6 @@ class ChamberTracer:
         inner = keep.copy()
         inner[[0, -1]] = False
         edge = (np.abs(r["lo"]) > r["half"] - 1.0) | (np.abs(r["hi"]) > r["half"] - 1.0)
-        dome = ~r["excluded"]
         r.update(
             spline=spl,
             u=puz[:, 0],
@@ -807,7 +803,6 @@ class ChamberTracer:
             points_u=U[inner],
             points_z=Z[inner],
             residual_rms=float(np.sqrt(np.mean(res[inner] ** 2))) if inner.any() else np.nan,
-            good_fraction=float(np.mean(r["good"][dome])) if dome.any() else 0.0,
             edge_fraction=float(np.mean(edge[use])) if use.any() else 1.0,
             ref_contrast=ref_con,
         )

@@ -861,3 +861,24 @@ def test_arc_resample_equals_numpy_interp():
         assert length == sc[-1]
         np.testing.assert_array_equal(uu, np.interp(si, sc, u))
         np.testing.assert_array_equal(zz, np.interp(si, sc, z))
+
+
+def test_clear_of_curve_equals_numpy_reference():
+    from osmobulge.imaging._kernels import clear_of_curve
+
+    rng = np.random.default_rng(5)
+    us = np.arange(-300.0, 300.0, 3.0)
+    for trial in range(20):
+        u = np.sort(rng.uniform(-250, 250, int(rng.integers(1, 400))))
+        z = rng.uniform(-5, 80 if trial % 4 else 5, u.size)
+        zmax = 30.0
+        low = z < zmax
+        want = np.ones(us.size, bool)
+        if low.any():  # the former code of ChamberTracer._geometry_at
+            lu = np.sort(u[low])
+            j = np.searchsorted(lu, us)
+            nl = len(lu) - 1
+            du = np.minimum(np.abs(us - lu[np.clip(j - 1, 0, nl)]), np.abs(us - lu[np.clip(j, 0, nl)]))
+            want = du > 6.0
+        np.testing.assert_array_equal(clear_of_curve(us, u, z, zmax, 6.0), want)
+    assert clear_of_curve(us, np.zeros(3), np.full(3, 99.0), zmax, 6.0).all()  # no point that low
