@@ -29,6 +29,7 @@ from osmobulge.imaging._kernels import (
     band_edges_rows,
     block_mean,
     dusty_rows,
+    line_band,
     nanmedian,
     native_frame,
     ridge_rows,
@@ -386,6 +387,25 @@ def measure_line(view, line, u, *, polarity, thickness, window):
         Median band width (px), median band contrast, RMS scatter (px).
     inliers : ndarray of bool
     """
+    # transects across the line, band edges, a clipped line through the good midlines: one compiled call
+    # (the numpy form is `_measure_line_numpy`)
+    u = np.ascontiguousarray(np.atleast_1d(np.asarray(u, float)))
+    offs = np.arange(-window, window + 1e-9, 0.5)
+    d, nv = line.direction, line.normal
+    a, b, rms, inl, wmed, cmed = line_band(native_frame(view.frame), view.k, float(line.x0), float(line.y0),
+                                           float(d[0]), float(d[1]), float(nv[0]), float(nv[1]), u, offs,
+                                           float(polarity), int((0.5 * thickness + 4) / 0.5), 4)
+    if not np.isfinite(a):
+        return line, thickness, np.nan, np.nan, inl
+    # new line: z = a + b u in the old frame
+    new = line.shifted(0.0, float(a))
+    # offsets along the normal grow as sin(angle - true angle) * u: subtract the slope
+    new = Line(new.x0, new.y0, line.angle - np.arctan(float(b)))
+    return new, float(wmed), float(cmed), float(rms), inl
+
+
+def _measure_line_numpy(view, line, u, *, polarity, thickness, window):
+    """:func:`measure_line` in numpy (the reference of its test)."""
     prof, offs = _transects(view, line, u, -window, window)
     mid, lo, hi, con, width = band_edges(prof, offs, polarity, centre=np.full(len(u), len(offs) // 2),
                                          search=int((0.5 * thickness + 4) / 0.5))
@@ -395,9 +415,7 @@ def measure_line(view, line, u, *, polarity, thickness, window):
     inl[np.flatnonzero(good)[ok]] = True
     if not np.isfinite(a):
         return line, thickness, np.nan, np.nan, inl
-    # new line: z = a + b u in the old frame
     new = line.shifted(0.0, a)
-    # offsets along the normal grow as sin(angle - true angle) * u: subtract the slope
     new = Line(new.x0, new.y0, line.angle - np.arctan(b))
     return new, _nanmedian(width[inl]), _nanmedian(con[inl]), rms, inl
 

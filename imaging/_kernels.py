@@ -22,13 +22,13 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-__all__ = ["sample_transects", "ends_noise", "band_edges_rows", "step_crossing_rows", "robust_line", "viterbi_rows",
-           "lsq_spline", "fill_rows_nanmedian", "nanmedian", "longest_run", "running_percentile", "low_contrast_run",
-           "ellipse_distance_folded", "robust_profile_spline", "strongest_edge", "native_frame", "guide_transects",
-           "revolution_halves", "clean_stations", "rim_bridge", "rim_zone", "abs_percentile", "extrapolated_curve",
-           "rim_contact", "curve_extent", "clear_of_curve", "ellipse_scatter", "conic_parameters", "direct_ellipse",
-           "ellipse_arc_volume", "profile_ellipse", "arc_resample", "dusty_rows", "wall_rows", "ridge_rows",
-           "block_mean", "signed_profiles", "compiled_on_disk"]
+__all__ = ["sample_transects", "ends_noise", "band_edges_rows", "step_crossing_rows", "robust_line", "line_band",
+           "viterbi_rows", "lsq_spline", "fill_rows_nanmedian", "nanmedian", "longest_run", "running_percentile",
+           "low_contrast_run", "ellipse_distance_folded", "robust_profile_spline", "strongest_edge", "native_frame",
+           "guide_transects", "revolution_halves", "clean_stations", "rim_bridge", "rim_zone", "abs_percentile",
+           "extrapolated_curve", "rim_contact", "curve_extent", "clear_of_curve", "ellipse_scatter",
+           "conic_parameters", "direct_ellipse", "ellipse_arc_volume", "profile_ellipse", "arc_resample",
+           "dusty_rows", "wall_rows", "ridge_rows", "block_mean", "signed_profiles", "compiled_on_disk"]
 
 
 @njit(cache=True, nogil=True)
@@ -568,6 +568,68 @@ def robust_line(x, y, iters, clip, floor):
             break
         ok[:] = new
     return a, b, rms, ok
+
+
+@njit(cache=True, nogil=True)
+def line_band(frame, k, x0, y0, d0, d1, n0, n1, u, offsets, polarity, search, side):
+    """The band centres across the flat line and their clipped line fit: ``_chamber.measure_line``'s arithmetic.
+
+    Transects along the normal ``(n0, n1)`` at the line points
+    ``(x0, y0) + u (d0, d1)`` (view rotated by ``k``), the band's edges
+    (``band_edges`` with the centre sample and ``search``, ``side`` samples for
+    the side levels), the rows with a finite midline and a contrast above a
+    quarter of the median, and :func:`robust_line` (4 rounds, 3 sigma, 0.1 px
+    floor) of their midlines over ``u``.  Returns ``a, b, rms, inliers`` and the
+    nan medians of the inliers' band width and contrast.
+    """
+    n = u.shape[0]
+    m = offsets.shape[0]
+    px = np.empty(n)
+    py = np.empty(n)
+    dx = np.empty(n)
+    dy = np.empty(n)
+    for i in range(n):
+        px[i] = x0 + u[i] * d0 + 0.0 * n0
+        py[i] = y0 + u[i] * d1 + 0.0 * n1
+        dx[i] = n0
+        dy[i] = n1
+    prof = np.empty((n, m))
+    _sample_transects(frame, k, px, py, dx, dy, offsets, prof)
+    q = signed_profiles(prof, polarity)
+    out = np.empty((5, n))
+    _band_edges_rows(q, offsets, np.full(n, m // 2, np.int64), np.full(n, search, np.int64), min(max(side, 1), m),
+                     out)
+    mid, con, width = out[0], out[3], out[4]
+    cmed = _nanmedian_flat(con.copy())
+    good = np.empty(n, np.bool_)
+    ng = 0
+    for i in range(n):
+        good[i] = np.isfinite(mid[i]) and con[i] > 0.25 * cmed
+        ng += good[i]
+    xs = np.empty(ng)
+    ys = np.empty(ng)
+    gi = np.empty(ng, np.int64)
+    j = 0
+    for i in range(n):
+        if good[i]:
+            xs[j], ys[j], gi[j] = u[i], mid[i], i
+            j += 1
+    a, b, rms, ok = robust_line(xs, ys, 4, 3.0, 0.1)
+    inl = np.zeros(n, np.bool_)
+    for j in range(ng):
+        if ok[j]:
+            inl[gi[j]] = True
+    ni = 0
+    for i in range(n):
+        ni += inl[i]
+    wi = np.empty(ni)
+    ci = np.empty(ni)
+    j = 0
+    for i in range(n):
+        if inl[i]:
+            wi[j], ci[j] = width[i], con[i]
+            j += 1
+    return a, b, rms, inl, _nanmedian_flat(wi), _nanmedian_flat(ci)
 
 
 @njit(cache=True, nogil=True)

@@ -9,7 +9,7 @@ from scipy import ndimage as ndi
 from osmobulge.imaging._chamber import FrameView, _robust_line, band_edges, step_crossing
 from osmobulge.imaging._kernels import sample_transects
 from osmobulge.imaging._normals import viterbi_path
-from osmobulge.imaging.synthetic import render_frame
+from osmobulge.imaging.synthetic import Nuisances, render_frame
 
 
 # ------------------------------------------------------------------------ numpy references (the former code)
@@ -882,3 +882,31 @@ def test_clear_of_curve_equals_numpy_reference():
             want = du > 6.0
         np.testing.assert_array_equal(clear_of_curve(us, u, z, zmax, 6.0), want)
     assert clear_of_curve(us, np.zeros(3), np.full(3, 99.0), zmax, 6.0).all()  # no point that low
+
+
+@pytest.mark.parametrize("k", [0, 1, 2, 3])
+def test_measure_line_equals_numpy_reference(k):
+    """The compiled line fit (line_band) against the former numpy measure_line, on a rendered frame seen rotated."""
+    from osmobulge.imaging._chamber import Line, _measure_line_numpy, find_chambers, measure_line
+
+    # the first frame of a series (a flat membrane, what find_chambers takes) with a little noise
+    frame = render_frame(0.0, chamber=(150e-6, 110e-6, 20e-6), seed=k, nuisances=Nuisances(noise_sigma=0.02))
+    stored = np.rot90(frame, -k).copy()  # stored so that view k shows the bulge up again
+    view = FrameView(stored, k)
+    g = find_chambers(view)
+    rng = np.random.default_rng(k)
+    hit = 0
+    for trial in range(12):
+        # a line near the flat band (a few px and a degree off) or (the last ones) far off it
+        dy = rng.uniform(-400, 400) if trial >= 9 else rng.normal(0, 3)
+        line = Line(g.line.x0 + rng.normal(0, 3), g.line.y0 + dy, g.line.angle + rng.normal(0, 0.02))
+        u = np.r_[np.arange(-500.0, -1.6 * g.rim_radius, 3.0), np.arange(1.6 * g.rim_radius, 500.0, 3.0)]
+        for pol in (1, -1):
+            kw = {"polarity": pol, "thickness": g.thickness, "window": 0.5 * g.thickness + 8.0}
+            got, want = measure_line(view, line, u, **kw), _measure_line_numpy(view, line, u, **kw)
+            assert (got[0].x0, got[0].y0, got[0].angle) == pytest.approx((want[0].x0, want[0].y0, want[0].angle),
+                                                                       rel=1e-12, abs=1e-12)
+            np.testing.assert_allclose(got[1:4], want[1:4], rtol=1e-12, equal_nan=True)
+            np.testing.assert_array_equal(got[4], want[4])
+            hit += got[4].sum() > 100
+    assert hit >= 3  # some lines did find the band
