@@ -268,7 +268,7 @@ def speed_and_memory(n_speed, n_mem, quick):
                     ser[i]
                 reads.append((time.perf_counter() - t0) / n_speed)
                 ser.close()
-            for _ in range(3 if label.startswith(("multi", "same")) else 1):
+            for _ in range(3):
                 if cold:
                     _drop_cache(path)
                 t0 = time.perf_counter()
@@ -295,7 +295,7 @@ def speed_and_memory(n_speed, n_mem, quick):
             modes[r.mode or "-"] = modes.get(r.mode or "-", 0) + 1
         print(f"\nreads: median of 3 passes, page cache warm (except the dropped row: posix_fadvise DONTNEED before"
               f" each pass; on a VM whose disk the host caches that is not a real disk figure); extractions: median"
-              f" of 3 (multi-page TIFF), else 1.  A read copies every frame; the extraction samples a memory-mapped"
+              f" of 3 passes as well.  A read copies every frame; the extraction samples a memory-mapped"
               f" TIFF in place (FrameSeries.peek) and touches only the pages it samples.\n"
               f"first extract call in a process (numba kernels loaded from cache or compiled): {t_first:.2f} s; "
               f"how frames were traced: {modes}")

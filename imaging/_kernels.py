@@ -1,19 +1,21 @@
 """Compiled inner loops of the tracer (numba).
 
 Transect sampling (with the view's rotation), the stations and normals of a
-pass with their smoothed transects, band edges, step edges, clipped line fits,
-the dynamic-programming path, banded least-squares cubic splines and the
-tracer's robust profile spline, station cleaning and rim bridges, the coarse
-wall search, dusty wall rows, the orientation's ridge filter and block means,
-solids of revolution, the ellipse's scatter sums, point distances and arc
-volume, nan medians, percentiles and run lengths.
+pass with their smoothed transects, band edges, step edges, clipped line fits
+and the flat line's band fit, the dynamic-programming path, banded
+least-squares cubic splines and the tracer's robust profile spline, station
+cleaning and rim bridges, the coarse wall search, dusty wall rows, the
+orientation's ridge filter and block means, solids of revolution, the
+ellipse's scatter sums, point distances and arc volume (and the stored
+profile's ellipse and arc-length resampling in one call each), the rim contact
+figure, nan medians, percentiles and run lengths.
 
 Each kernel does what a short numpy/scipy expression or a former numpy function
 does (named in its docstring, and checked against it in
 ``tests/imaging/test_kernels.py``, or ``test_geometry.py`` for the ellipse;
 ``dusty_rows`` was written compiled and has its own tests in
 ``test_wall_dust.py``) without the temporary arrays and the per-call overhead
-that dominate a frame's tracing time.  Compiled on first use (about 30 s once
+that dominate a frame's tracing time.  Compiled on first use (about 40 s once
 per machine) and cached on disk (``cache=True``).
 """
 
