@@ -30,7 +30,7 @@ __all__ = ["sample_transects", "ends_noise", "band_edges_rows", "step_crossing_r
            "guide_transects", "revolution_halves", "clean_stations", "rim_bridge", "rim_zone", "abs_percentile",
            "extrapolated_curve", "rim_contact", "curve_extent", "clear_of_curve", "ellipse_scatter",
            "conic_parameters", "direct_ellipse", "ellipse_arc_volume", "profile_ellipse", "arc_resample",
-           "dusty_rows", "wall_rows", "ridge_rows", "block_mean", "signed_profiles", "compiled_on_disk"]
+           "dusty_rows", "wall_rows", "locate_walls", "ridge_rows", "block_mean", "signed_profiles", "compiled_on_disk"]
 
 
 @njit(cache=True, nogil=True)
@@ -2016,6 +2016,90 @@ def wall_rows(frame, k, x0, y0, d0, d1, n0, n1, u0, slope, zs, top, offs):
         zz[i] = zs[i] - top
         uu[i] = uc[i] + pos[i]
     return zz, uu
+
+@njit(cache=True, nogil=True)
+def locate_walls(frame, k, x0, y0, d0, d1, n0, n1, u_left, u_right, slope_left, slope_right, wall_sign, zs_coarse,
+                 offs_coarse, zs, top, offs):
+    """Both walls of a tracked frame in one call: the coarse search, then each wall's first clipped line fit.
+
+    ``ChamberTracer._coarse_walls`` (the strongest edge of the wall's sign,
+    ``wall_sign`` for the left wall and ``-wall_sign`` for the right, on the
+    rows ``zs_coarse`` at offsets ``offs_coarse`` along the line; both walls
+    keep their prediction when either search fails), then the first attempt of
+    ``_chamber.measure_walls`` for each wall (:func:`wall_rows`,
+    :func:`robust_line` with 4 rounds, 2.5 sigma, 0.1 px floor) and its
+    combination of a weak wall's slope with the other's, mirrored.
+
+    Returns ``status, coarse_left, coarse_right, a_left, b_left, a_right, b_right, rms``:
+    status 0 done; 1 a wall has no fit (``measure_walls`` gives None); 2 a first
+    fit is poor (RMS > 0.5 px): the caller runs ``measure_walls`` (with its
+    robust second attempt) from the coarse walls.
+    """
+    nc = zs_coarse.shape[0]
+    px = np.empty(nc)
+    py = np.empty(nc)
+    dx = np.full(nc, d0)
+    dy = np.full(nc, d1)
+    cl, cr = u_left, u_right
+    for side in range(2):
+        u0 = u_left if side == 0 else u_right
+        slope = slope_left if side == 0 else slope_right
+        for i in range(nc):
+            u = u0 + slope * (zs_coarse[i] - top)
+            px[i] = x0 + u * d0 + zs_coarse[i] * n0
+            py[i] = y0 + u * d1 + zs_coarse[i] * n1
+        j = _strongest_edge(frame, k, px, py, dx, dy, offs_coarse, wall_sign if side == 0 else -wall_sign)
+        if j < 0:
+            cl, cr = u_left, u_right
+            break
+        if side == 0:
+            cl = u0 + offs_coarse[j]
+        else:
+            cr = u0 + offs_coarse[j]
+    a = np.empty(2)
+    b = np.empty(2)
+    szz = np.empty(2)
+    rms_max = -np.inf
+    n_used = np.zeros(2, np.int64)
+    zsum = np.zeros(2)
+    usum = np.zeros(2)
+    for side in range(2):
+        u0 = cl if side == 0 else cr
+        slope = slope_left if side == 0 else slope_right
+        zz, uu = wall_rows(frame, k, x0, y0, d0, d1, n0, n1, u0, slope, zs, top, offs)
+        aa, bb, rms, ok = robust_line(zz, uu, 4, 2.5, 0.1)
+        m = 0
+        for i in range(ok.shape[0]):
+            m += ok[i]
+        if not (np.isfinite(aa) and m >= 3):
+            return 1, cl, cr, np.nan, np.nan, np.nan, np.nan, np.nan
+        if not rms <= 0.5:
+            return 2, cl, cr, np.nan, np.nan, np.nan, np.nan, np.nan
+        a[side], b[side] = aa, bb
+        rms_max = max(rms_max, rms)
+        zr = np.empty(m)
+        j = 0
+        for i in range(ok.shape[0]):
+            if ok[i]:
+                zr[j] = zz[i]
+                zsum[side] += zz[i]
+                usum[side] += uu[i]
+                j += 1
+        mean = zr.mean()
+        ss = 0.0
+        for j in range(m):
+            ss += (zr[j] - mean) ** 2
+        szz[side] = ss
+        n_used[side] = m
+    # a weak wall (short spread of rows) takes the other's slope, mirrored, into its own (spread-weighted)
+    weak = 1 if szz[1] < szz[0] else 0  # sorted() of the two keeps the left first on a tie
+    strong = 1 - weak
+    if szz[weak] < 0.5 * szz[strong] and n_used[weak] >= 3:
+        bw = (szz[weak] * b[weak] - szz[strong] * b[strong]) / (szz[weak] + szz[strong])
+        a[weak] = usum[weak] / n_used[weak] - bw * (zsum[weak] / n_used[weak])
+        b[weak] = bw
+    return 0, cl, cr, a[0], b[0], a[1], b[1], rms_max
+
 
 @njit(cache=True, nogil=True)
 def ridge_rows(img, w_max):

@@ -67,6 +67,7 @@ from osmobulge.imaging._kernels import (
     ends_noise,
     extrapolated_curve,
     guide_transects,
+    locate_walls,
     low_contrast_run,
     lsq_spline,
     native_frame,
@@ -74,7 +75,6 @@ from osmobulge.imaging._kernels import (
     rim_contact,
     rim_zone,
     robust_profile_spline,
-    strongest_edge,
 )
 from osmobulge.imaging._normals import resample_polyline, viterbi_path
 from osmobulge.imaging.geometry import ProfileSpline, revolution_measures, smooth_profile, sorted_quantile
@@ -266,6 +266,7 @@ class ChamberTracer:
         # flat-line columns: away from every well's rim
         self._flat_u = self._flat_columns(view)
         self._rim_contact_u = self._rim_contact_columns()
+        self._wall_grid = {}  # well depth -> the wall rows and offsets (_wall_rows_at)
 
     def _rim_contact_columns(self):
         """The 15 flat columns nearest the axis on each side (left, right), where the rim contact is referred to."""
@@ -361,26 +362,44 @@ class ChamberTracer:
         score[-(w + fl):] = -np.inf
         return line.shifted(0.0, float(offs[int(np.argmax(score))]))
 
-    def _coarse_walls(self, view, line, well):
-        """Move the predicted walls onto the strongest edges of the right sign (median over rows)."""
+    def _wall_rows_at(self, depth):
+        """Rows and offsets of the coarse wall search and of the wall fits (cached: the same every frame)."""
+        key = float(depth)
+        cache = self._wall_grid
+        if key not in cache:
+            g0 = self.ref
+            top = -0.5 * g0.thickness
+            d = depth if np.isfinite(depth) else 4.0 * g0.thickness
+            span = self.settings.max_drift
+            cache[key] = (top - np.linspace(0.2, 0.7, 9) * d, np.arange(-span, span + 1e-9, 1.0),
+                          top - np.linspace(0.06, 0.92, int(np.clip(0.86 * d, 8, 250))) * d,
+                          np.arange(-WALL_WINDOW, WALL_WINDOW + 1e-9, 0.5))
+        return cache[key]
+
+    def _walls(self, view, line, well):
+        """Both walls of a frame near their prediction: the refined :class:`Well` and the wall RMS (None, nan: lost).
+
+        First the predicted walls move onto the strongest edges of the right
+        sign within ``max_drift`` (median over 9 rows), then
+        :func:`~osmobulge.imaging._chamber.measure_walls` fits them: both
+        compiled in one call (:func:`~osmobulge.imaging._kernels.locate_walls`);
+        ``measure_walls`` itself runs when a first fit is poor (its robust second
+        attempt).
+        """
         g0 = self.ref
-        top = -0.5 * g0.thickness
-        depth = g0.well.depth if np.isfinite(g0.well.depth) else 4 * g0.thickness
-        zs = top - np.linspace(0.2, 0.7, 9) * depth
-        span = self.settings.max_drift
-        out = {}
-        offs = np.arange(-span, span + 1e-9, 1.0)
-        d = line.direction
-        dx, dy = np.full(len(zs), d[0]), np.full(len(zs), d[1])
-        for name, u0, slope, sign in (("u_left", well.u_left, well.slope_left, self._wall_sign),
-                                      ("u_right", well.u_right, well.slope_right, -self._wall_sign)):
-            p = line.point(u0 + slope * (zs - top), zs)
-            # the strongest edge of the wall's sign in the median over rows, smoothed (sigma 1 px)
-            j = strongest_edge(view.frame, view.k, p[:, 0], p[:, 1], dx, dy, offs, float(sign))
-            if j < 0:
-                return well
-            out[name] = u0 + float(offs[j])
-        return replace(well, **out)
+        zs_c, offs_c, zs, offs = self._wall_rows_at(well.depth)
+        d, nv = line.direction, line.normal
+        status, cl, cr, al, bl, ar, br, rms = locate_walls(
+            view.frame, view.k, float(line.x0), float(line.y0), float(d[0]), float(d[1]), float(nv[0]), float(nv[1]),
+            float(well.u_left), float(well.u_right), float(well.slope_left), float(well.slope_right),
+            float(self._wall_sign), zs_c, offs_c, zs, -0.5 * g0.thickness, offs)
+        if status == 1:
+            return None, np.nan
+        well = replace(well, u_left=float(cl), u_right=float(cr))
+        if status == 2:
+            return measure_walls(view, line, well, thickness=g0.thickness, window=WALL_WINDOW)
+        return replace(well, u_left=float(al), slope_left=float(bl), u_right=float(ar),
+                       slope_right=float(br)), float(rms)
 
     def measure_geometry(self, view):
         """Drift, flat line, walls and rim of the chamber in one frame (a :class:`ChamberGeometry`).
@@ -430,8 +449,7 @@ class ChamberTracer:
             dz = abs(float(np.dot(line.point(0.0) - predicted.point(0.0), line.normal)))
             if not (dz < 6.0 and abs(con) > 0.5 * abs(g0.contrast)):
                 return None, drift
-        well = self._coarse_walls(view, line, well)
-        well, wall_rms = measure_walls(view, line, well, thickness=g0.thickness, window=WALL_WINDOW)
+        well, wall_rms = self._walls(view, line, well)
         if well is None:
             return None, drift
         ax = well.centre

@@ -910,3 +910,73 @@ def test_measure_line_equals_numpy_reference(k):
             np.testing.assert_array_equal(got[4], want[4])
             hit += got[4].sum() > 100
     assert hit >= 3  # some lines did find the band
+
+
+def _ref_walls(tracer, view, line, well):
+    """The former ChamberTracer._coarse_walls (numpy) followed by measure_walls: the reference of _walls."""
+    from dataclasses import replace
+
+    from osmobulge.imaging._chamber import WALL_WINDOW, measure_walls
+    from osmobulge.imaging._kernels import strongest_edge
+
+    g0 = tracer.ref
+    top = -0.5 * g0.thickness
+    depth = g0.well.depth if np.isfinite(g0.well.depth) else 4 * g0.thickness
+    zs = top - np.linspace(0.2, 0.7, 9) * depth
+    span = tracer.settings.max_drift
+    out = {}
+    offs = np.arange(-span, span + 1e-9, 1.0)
+    d = line.direction
+    dx, dy = np.full(len(zs), d[0]), np.full(len(zs), d[1])
+    coarse = well
+    for name, u0, slope, sign in (("u_left", well.u_left, well.slope_left, tracer._wall_sign),
+                                  ("u_right", well.u_right, well.slope_right, -tracer._wall_sign)):
+        p = line.point(u0 + slope * (zs - top), zs)
+        j = strongest_edge(view.frame, view.k, p[:, 0], p[:, 1], dx, dy, offs, float(sign))
+        if j < 0:
+            break
+        out[name] = u0 + float(offs[j])
+    else:
+        coarse = replace(well, **out)
+    return measure_walls(view, line, coarse, thickness=g0.thickness, window=WALL_WINDOW)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_walls_equal_coarse_search_and_measure_walls(seed, monkeypatch):
+    """locate_walls (one call) against the former coarse search + measure_walls.
+
+    Walls predicted off by up to ~30 px, with wrong slopes (a poor first fit:
+    measure_walls' second attempt decides) and on lines far off the surface
+    (walls lost).
+    """
+    from dataclasses import replace
+
+    from osmobulge.imaging import trace as T
+    from osmobulge.imaging.synthetic import render_series
+
+    status = []
+    real = T.locate_walls
+    monkeypatch.setattr(T, "locate_walls", lambda *a: status.append(int(real(*a)[0])) or real(*a))
+    nu = Nuisances(noise_sigma=0.02, dust_count=40 * (seed > 0), blur_sigma=1.0 + seed, tilt=2.0 * seed)
+    s = render_series([0.0, 2.0], chamber=(150e-6, 110e-6, 20e-6), seed=seed, nuisances=nu)
+    tr = T.ChamberTracer(s.frames[0])
+    rng = np.random.default_rng(seed)
+    g = tr.ref
+    cases = [(rng.normal(0, 4 if t < 15 else 15, 2), rng.normal(0, 0.05, 2), rng.normal(0, 1)) for t in range(25)]
+    cases += [(np.zeros(2), np.array([-sl, sl]), dz) for sl in (0.1, 0.2, 0.3)
+              for dz in (0.0, -60.0, 150.0, -400.0, 3000.0)]
+    for frame in s.frames:
+        view = FrameView(frame, tr.k)
+        for du, sl, dz in cases:
+            line = g.line.shifted(rng.normal(0, 2), dz)
+            well = replace(g.well, u_left=g.well.u_left + du[0], u_right=g.well.u_right + du[1],
+                           slope_left=sl[0], slope_right=sl[1])
+            got, want = tr._walls(view, line, well), _ref_walls(tr, view, line, well)
+            if want[0] is None:
+                assert got[0] is None and np.isnan(got[1])
+                continue
+            w0, w1 = got[0], want[0]
+            np.testing.assert_allclose([w0.u_left, w0.u_right, w0.slope_left, w0.slope_right, got[1]],
+                                       [w1.u_left, w1.u_right, w1.slope_left, w1.slope_right, want[1]],
+                                       rtol=1e-12, atol=1e-12)
+    assert set(status) == {0, 1, 2}  # done in one call, walls lost, measure_walls' second attempt
