@@ -2115,22 +2115,26 @@ def ridge_rows(img, w_max):
     rows = np.zeros(w, np.int64)
     vals = np.zeros(w, np.float32)
     top_abs = np.full(w, np.float32(-1.0))
-    for i in range(h):  # row by row (contiguous), the best per column kept
+    best = np.empty(w, np.float32)
+    zero = np.float32(0.0)
+    for i in range(h):  # row by row, the widths in the middle loop and the columns innermost (contiguous)
         kmax = min(w_max, i, h - 1 - i)
+        best[:] = zero
+        x = img[i]
+        for k in range(1, kmax + 1):
+            up = img[i - k]
+            dn = img[i + k]
+            for j in range(w):
+                du = up[j] - x[j]
+                dd = dn[j] - x[j]
+                same = ((du > 0) == (dd > 0)) and ((du < 0) == (dd < 0))  # np.sign(du) == np.sign(dd)
+                r = half * (up[j] + dn[j]) - x[j]
+                if same and abs(r) > abs(best[j]):
+                    best[j] = r
         for j in range(w):
-            best = np.float32(0.0)
-            x = img[i, j]
-            for k in range(1, kmax + 1):
-                du = img[i - k, j] - x
-                dd = img[i + k, j] - x
-                if (du > 0) != (dd > 0) or (du < 0) != (dd < 0):  # np.sign(du) != np.sign(dd)
-                    continue
-                r = half * (img[i - k, j] + img[i + k, j]) - x
-                if abs(r) > abs(best):
-                    best = r
-            if abs(best) > top_abs[j]:
-                top_abs[j] = abs(best)
-                vals[j] = best
+            if abs(best[j]) > top_abs[j]:
+                top_abs[j] = abs(best[j])
+                vals[j] = best[j]
                 rows[j] = i
     return rows, vals
 
