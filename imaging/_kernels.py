@@ -27,10 +27,11 @@ from numba import njit
 __all__ = ["sample_transects", "ends_noise", "band_edges_rows", "step_crossing_rows", "robust_line", "line_band",
            "viterbi_rows", "lsq_spline", "fill_rows_nanmedian", "nanmedian", "longest_run", "running_percentile",
            "low_contrast_run", "ellipse_distance_folded", "robust_profile_spline", "strongest_edge", "native_frame",
-           "guide_transects", "revolution_halves", "clean_stations", "rim_bridge", "rim_zone", "abs_percentile",
-           "extrapolated_curve", "rim_contact", "curve_extent", "clear_of_curve", "ellipse_scatter",
-           "conic_parameters", "direct_ellipse", "ellipse_arc_volume", "profile_ellipse", "arc_resample",
-           "dusty_rows", "wall_rows", "locate_walls", "ridge_rows", "block_mean", "signed_profiles", "compiled_on_disk"]
+           "guide_transects", "revolution_halves", "clean_stations", "track_pass", "rim_bridge", "rim_zone",
+           "abs_percentile", "extrapolated_curve", "rim_contact", "curve_extent", "clear_of_curve",
+           "ellipse_scatter", "conic_parameters", "direct_ellipse", "ellipse_arc_volume", "profile_ellipse",
+           "arc_resample", "dusty_rows", "wall_rows", "locate_walls", "ridge_rows", "block_mean", "signed_profiles",
+           "compiled_on_disk"]
 
 
 @njit(cache=True, nogil=True)
@@ -1270,6 +1271,54 @@ def clean_stations(mid, contrast, spx, spy, nx, ny, x0, y0, dirx, diry, nrmx, nr
             c += 1
     sigma = 1.4826 * np.median(d2[:c]) / np.sqrt(6.0) if c > 10 else np.nan
     return pu, pz, good, excl, use, sigma
+
+
+@njit(cache=True, nogil=True)
+def track_pass(frame, k, gu, gz, x0, y0, d0, d1, n0, n1, step, offsets, polarity, search, side, R, zc, near,
+               min_contrast, ref_con, win):
+    """The tracking pass of ``ChamberTracer._passes`` up to its motion figure, in one call.
+
+    The guide ``(gu, gz)`` (line coordinates) in the view
+    (``Line.point``: ``(x0, y0) + u (d0, d1) + z (n0, n1)``), then
+    :func:`guide_transects` (stations every ``step``, their smoothed
+    transects at ``offsets``), ``band_edges`` about each transect's centre
+    sample within ``search`` samples (``side`` samples for the side levels),
+    :func:`ends_noise`, :func:`clean_stations` with the contrast floor
+    ``max(min_contrast ref_con, 4 noise)`` (as Python's ``max``) and the 90th
+    percentile of the used stations' ``|mid|`` (:func:`abs_percentile`).
+
+    Returns ``pts, s, nrm, mid, lo, hi, contrast, width, noise, pu, pz, good,
+    excl, use, sigma_d2, motion``.
+    """
+    n = gu.shape[0]
+    gx = np.empty(n)
+    gy = np.empty(n)
+    for i in range(n):
+        gx[i] = x0 + gu[i] * d0 + gz[i] * n0
+        gy[i] = y0 + gu[i] * d1 + gz[i] * n1
+    pts, s, nrm = _guide_stations(gx, gy, step, 2.0 / step)
+    ns = pts.shape[0]
+    m = offsets.shape[0]
+    prof = np.empty((ns, m))
+    _sample_transects(frame, k, pts[:, 0].copy(), pts[:, 1].copy(), nrm[:, 0].copy(), nrm[:, 1].copy(), offsets,
+                      prof)
+    prof = _fill_and_smooth(prof, 1.0 / step)
+    q = signed_profiles(prof, polarity)
+    out = np.empty((5, ns))
+    _band_edges_rows(q, offsets, np.full(ns, m // 2, np.int64), np.full(ns, search, np.int64), min(max(side, 1), m),
+                     out)
+    noise = ends_noise(prof)
+    floor = min_contrast * ref_con
+    if 4.0 * noise > floor:
+        floor = 4.0 * noise
+    mid = out[0].copy()
+    con = out[3].copy()
+    pu, pz, good, excl, use, sigma = clean_stations(mid, con, pts[:, 0].copy(), pts[:, 1].copy(), nrm[:, 0].copy(),
+                                                    nrm[:, 1].copy(), x0, y0, d0, d1, n0, n1, R, zc, near, floor,
+                                                    win)
+    motion = abs_percentile(mid, use, 90.0)
+    return (pts, s, nrm, mid, out[1].copy(), out[2].copy(), con, out[4].copy(), noise, pu, pz, good, excl, use,
+            sigma, motion)
 
 
 @njit(cache=True, nogil=True)

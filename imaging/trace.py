@@ -75,6 +75,7 @@ from osmobulge.imaging._kernels import (
     rim_contact,
     rim_zone,
     robust_profile_spline,
+    track_pass,
 )
 from osmobulge.imaging._normals import resample_polyline, viterbi_path
 from osmobulge.imaging.geometry import ProfileSpline, revolution_measures, smooth_profile, sorted_quantile
@@ -554,6 +555,29 @@ class ChamberTracer:
         return {"mid": mid, "lo": lo, "hi": hi, "contrast": con, "width": width, "stations": s, "noise": noise,
                 "station_pts": pts, "normals": nrm, "half": w}
 
+    def _track_pass(self, view, g, guide_uz, half, ref_con):
+        """:meth:`_refine` (a narrow pass, no dynamic programming), :meth:`_clean` and the pass's motion, compiled.
+
+        One call of :func:`~osmobulge.imaging._kernels.track_pass` (tested
+        equal to the three steps): the tracked frame's pass.
+        """
+        st = self.settings
+        w = half + 0.5 * g.thickness
+        offs = np.arange(-w, w + 1e-9, st.sample_step)
+        line = g.line
+        d, nv = line.direction, line.normal
+        zc, near = self._exclusion_zone(g)
+        (pts, s, nrm, mid, lo, hi, con, width, noise, pu, pz, good, excl, use, sigma, motion) = track_pass(
+            view.frame, view.k, np.ascontiguousarray(guide_uz[:, 0], np.float64),
+            np.ascontiguousarray(guide_uz[:, 1], np.float64), float(line.x0), float(line.y0), float(d[0]),
+            float(d[1]), float(nv[0]), float(nv[1]), float(st.station_step), offs, float(g.polarity),
+            int(round((0.5 * g.thickness + half) / st.sample_step)), max(2, int(1.5 / st.sample_step)),
+            float(g.rim_radius), float(zc), float(near), float(st.min_contrast), float(ref_con), 15)
+        sigma = st.smoothing if not np.isfinite(sigma) else sigma
+        return {"mid": mid, "lo": lo, "hi": hi, "contrast": con, "width": width, "stations": s, "noise": float(noise),
+                "station_pts": pts, "normals": nrm, "half": w, "pu": pu, "pz": pz, "good": good, "excluded": excl,
+                "use": use, "sigma": float(np.clip(sigma, 0.01, 3.0)), "motion": float(motion)}
+
     def _exclusion(self, g, u, z):
         """Points merged with the flat band (at or beyond the rims, or close to a rim point) are not trusted.
 
@@ -768,14 +792,17 @@ class ChamberTracer:
         ref_con = abs(g.contrast) if np.isfinite(g.contrast) else None
         # pass 1: wide search with dynamic programming and a robust stiff spline for the next guide, or
         # (tracking from the last frame) a narrow search and the stations moved by their smoothed offsets
-        r = self._refine(view, g, guide_uz, half, dp=not track)
-        if ref_con is None:
-            ref_con = float(np.nanpercentile(r["contrast"], 90))
-        r = self._clean(g, r, ref_con)
+        if track and ref_con is not None:  # the narrow pass, cleaned, and its motion: one compiled call
+            r = self._track_pass(view, g, guide_uz, half, ref_con)
+        else:
+            r = self._refine(view, g, guide_uz, half, dp=not track)
+            if ref_con is None:
+                ref_con = float(np.nanpercentile(r["contrast"], 90))
+            r = self._clean(g, r, ref_con)
         use = r["use"]
         if use.sum() < 6:
             return None
-        motion = moved = float(abs_percentile(r["mid"], use, 90.0))
+        motion = moved = r["motion"] if "motion" in r else float(abs_percentile(r["mid"], use, 90.0))
         if track and motion > half - 2.0 - 2.0 * self.blur:
             # the band came close to the window's end (the prediction was off): its edges and width are
             # not to be trusted -- the wide search takes over

@@ -980,3 +980,36 @@ def test_walls_equal_coarse_search_and_measure_walls(seed, monkeypatch):
                                        [w1.u_left, w1.u_right, w1.slope_left, w1.slope_right, want[1]],
                                        rtol=1e-12, atol=1e-12)
     assert set(status) == {0, 1, 2}  # done in one call, walls lost, measure_walls' second attempt
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_track_pass_equals_refine_clean_and_motion(seed):
+    """track_pass (one call) against ChamberTracer._refine (narrow), _clean and the motion percentile."""
+    from osmobulge.imaging._kernels import abs_percentile
+    from osmobulge.imaging.synthetic import render_series
+    from osmobulge.imaging.trace import ChamberTracer
+
+    nu = Nuisances(noise_sigma=0.02, dust_count=30 * seed, blur_sigma=1.0 + 0.5 * seed, tilt=1.5 * seed)
+    s = render_series([0.0, 1.0, 1.3, 4.0], chamber=(150e-6, 110e-6, 20e-6), seed=seed, nuisances=nu)
+    tr = ChamberTracer(s.frames[0])
+    prev = tr.process(s.frames[1], 1)
+    rng = np.random.default_rng(seed)
+    used = []
+    for frame in s.frames[2:]:  # Vtilde 1.3: near the last dome; 4: far from it (the band mostly lost)
+        view = FrameView(frame, tr.k)
+        g, _ = tr.measure_geometry(view)
+        for half in (5.0, 7.5, 10.0):
+            # the last dome as the guide, moved off by up to a few px (the band near or beyond the window's end)
+            guide = np.c_[prev.u, prev.z + rng.normal(0, 1.5)]
+            ref_con = abs(g.contrast)
+            got = tr._track_pass(view, g, guide, half, ref_con)
+            want = tr._clean(g, tr._refine(view, g, guide, half, dp=False), ref_con)
+            want["motion"] = float(abs_percentile(want["mid"], want["use"], 90.0))
+            assert set(got) == set(want)
+            for key, v in want.items():
+                if isinstance(v, np.ndarray) and v.dtype == bool:
+                    np.testing.assert_array_equal(got[key], v, err_msg=key)
+                else:
+                    np.testing.assert_allclose(got[key], v, rtol=1e-12, atol=1e-12, equal_nan=True, err_msg=key)
+            used.append(int(got["use"].sum()))
+    assert max(used) > 50  # the band was found along the dome (not in every case)
