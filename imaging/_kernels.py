@@ -26,9 +26,9 @@ from numba import njit
 
 __all__ = ["sample_transects", "ends_noise", "band_edges_rows", "step_crossing_rows", "robust_line", "line_band",
            "viterbi_rows", "lsq_spline", "fill_rows_nanmedian", "nanmedian", "longest_run", "running_percentile",
-           "low_contrast_run", "ellipse_distance_folded", "robust_profile_spline", "strongest_edge", "native_frame",
-           "guide_transects", "revolution_halves", "clean_stations", "track_pass", "rim_bridge", "rim_zone",
-           "abs_percentile", "extrapolated_curve", "rim_contact", "curve_extent", "clear_of_curve",
+           "low_contrast_run", "ellipse_distance_folded", "robust_profile_spline", "pass_tail", "strongest_edge",
+           "native_frame", "guide_transects", "revolution_halves", "clean_stations", "track_pass", "rim_bridge",
+           "rim_zone", "abs_percentile", "extrapolated_curve", "rim_contact", "curve_extent", "clear_of_curve",
            "ellipse_scatter", "conic_parameters", "direct_ellipse", "ellipse_arc_volume", "profile_ellipse",
            "arc_resample", "dusty_rows", "wall_rows", "locate_walls", "ridge_rows", "block_mean", "signed_profiles",
            "compiled_on_disk"]
@@ -984,6 +984,60 @@ def robust_profile_spline(U, Z, ks, pinned, step):
     curve = np.empty((ns, 2))
     _bspl_eval(t, c, 3, us, curve)
     return 0, keep, t, c, resid, uu, ss, curve
+
+
+@njit(cache=True, nogil=True)
+def pass_tail(pu_all, pz_all, use, R, reach, ks, step, lo, hi, half):
+    """The end of a pass (``ChamberTracer._passes``): rim bridges, the final robust spline and the pass figures.
+
+    The used stations' band points, :func:`rim_bridge` to both rims (``reach``
+    px), the points ``U, Z`` from rim to rim (pinned ends at ``(-R, 0)``,
+    ``(R, 0)``), :func:`robust_profile_spline` of them (knots ``ks`` apart, the
+    curve every ``step`` px), the RMS residual of the kept inner points, and
+    the fraction of used stations with a band edge within 1 px of the
+    window's end ``half``.  Returns ``status`` (that of the spline), ``U, Z``,
+    the spline's ``keep, t, c, residuals, uu, ss, curve``, ``residual_rms``
+    and ``edge_fraction``.
+    """
+    n = pu_all.shape[0]
+    m = 0
+    for i in range(n):
+        m += use[i]
+    pu = np.empty(m)
+    pz = np.empty(m)
+    j = 0
+    n_edge = 0
+    for i in range(n):
+        if use[i]:
+            pu[j], pz[j] = pu_all[i], pz_all[i]
+            j += 1
+            if abs(lo[i]) > half - 1.0 or abs(hi[i]) > half - 1.0:
+                n_edge += 1
+    bl = rim_bridge(pu, pz, R, -1.0, reach)
+    br = rim_bridge(pu, pz, R, 1.0, reach)
+    nl, nr = bl.shape[0], br.shape[0]
+    N = 2 + nl + m + nr
+    U = np.empty(N)
+    Z = np.empty(N)
+    U[0], Z[0] = -R, 0.0
+    for i in range(nl):
+        U[1 + i], Z[1 + i] = bl[i, 0], bl[i, 1]
+    for i in range(m):
+        U[1 + nl + i], Z[1 + nl + i] = pu[i], pz[i]
+    for i in range(nr):
+        U[1 + nl + m + i], Z[1 + nl + m + i] = br[nr - 1 - i, 0], br[nr - 1 - i, 1]
+    U[N - 1], Z[N - 1] = R, 0.0
+    status, keep, t, c, res, uu, ss, curve = robust_profile_spline(U, Z, ks, True, step)
+    ss_in = 0.0
+    n_in = 0
+    if status == 0:
+        for i in range(1, N - 1):
+            if keep[i]:
+                ss_in += res[i] * res[i]
+                n_in += 1
+    rms = np.sqrt(ss_in / n_in) if n_in else np.nan
+    edge_fraction = n_edge / m if m else 1.0
+    return status, U, Z, keep, t, c, res, uu, ss, curve, rms, edge_fraction
 
 
 def strongest_edge(frame, k, px, py, dx, dy, offsets, sign):

@@ -71,6 +71,7 @@ from osmobulge.imaging._kernels import (
     low_contrast_run,
     lsq_spline,
     native_frame,
+    pass_tail,
     rim_bridge,
     rim_contact,
     rim_zone,
@@ -831,24 +832,27 @@ class ChamberTracer:
             uz = self._offset_guide(g, r) if track else self._guide_from(g, r, ks)
         r["converged"] = moved < 1.0
         r["motion"] = motion
-        pu, pz = r["pu"][use], r["pz"][use]
-        bl, br = self._bridge(g, pu, pz, -1.0), self._bridge(g, pu, pz, 1.0)
-        U = np.concatenate(([-R], bl[:, 0], pu, br[::-1, 0], [R]))
-        Z = np.concatenate(([0.0], bl[:, 1], pz, br[::-1, 1], [0.0]))
         ks = float(np.clip(4.0 + 10.0 * r["sigma"], 4.0, 15.0))
-        spl, keep, puz = self._final_fit(U, Z, ks)
-        res = spl.residuals
+        # bridges to the rims, the final robust spline and the pass figures: one compiled call
+        # (the scipy solver takes over when a band system is singular, as in _final_fit)
+        status, U, Z, keep, _, _, res, _, _, puz, rms, edge_fraction = pass_tail(
+            np.ascontiguousarray(r["pu"], np.float64), np.ascontiguousarray(r["pz"], np.float64), use, float(R),
+            40.0, ks, 1.0, np.ascontiguousarray(r["lo"], np.float64), np.ascontiguousarray(r["hi"], np.float64),
+            float(r["half"]))
+        if status != 0:
+            spl, keep, puz = self._final_fit(U, Z, ks)
+            res = spl.residuals
         inner = keep.copy()
         inner[[0, -1]] = False
-        edge = (np.abs(r["lo"]) > r["half"] - 1.0) | (np.abs(r["hi"]) > r["half"] - 1.0)
+        if status != 0:
+            rms = float(np.sqrt(np.mean(res[inner] ** 2))) if inner.any() else np.nan
         r.update(
-            spline=spl,
             u=puz[:, 0],
             z=puz[:, 1],
             points_u=U[inner],
             points_z=Z[inner],
-            residual_rms=float(np.sqrt(np.mean(res[inner] ** 2))) if inner.any() else np.nan,
-            edge_fraction=float(np.mean(edge[use])) if use.any() else 1.0,
+            residual_rms=float(rms),
+            edge_fraction=float(edge_fraction),
             ref_contrast=ref_con,
         )
         return r

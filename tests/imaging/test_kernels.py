@@ -1013,3 +1013,47 @@ def test_track_pass_equals_refine_clean_and_motion(seed):
                     np.testing.assert_allclose(got[key], v, rtol=1e-12, atol=1e-12, equal_nan=True, err_msg=key)
             used.append(int(got["use"].sum()))
     assert max(used) > 50  # the band was found along the dome (not in every case)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_pass_tail_equals_bridges_final_fit_and_figures(seed):
+    """pass_tail (one call) against the former end of _passes: bridges, _final_fit, residual RMS, edge fraction."""
+    from osmobulge.imaging._kernels import pass_tail
+    from osmobulge.imaging.synthetic import render_series
+    from osmobulge.imaging.trace import ChamberTracer
+
+    nu = Nuisances(noise_sigma=0.02, dust_count=30 * seed, blur_sigma=1.0 + 0.5 * seed)
+    s = render_series([0.0, 1.0, 1.2, 3.0], chamber=(150e-6, 110e-6, 20e-6), seed=seed, nuisances=nu)
+    tr = ChamberTracer(s.frames[0])
+    prev = tr.process(s.frames[1], 1)
+    rng = np.random.default_rng(seed)
+    checked = 0
+    for frame in s.frames[2:]:
+        view = FrameView(frame, tr.k)
+        g, _ = tr.measure_geometry(view)
+        for half in (5.0, 9.0):
+            r = tr._track_pass(view, g, np.c_[prev.u, prev.z + rng.normal(0, 1.0)], half, abs(g.contrast))
+            use, R = r["use"], g.rim_radius
+            if use.sum() < 6:
+                continue
+            pu, pz = r["pu"][use], r["pz"][use]
+            bl, br = tr._bridge(g, pu, pz, -1.0), tr._bridge(g, pu, pz, 1.0)
+            U = np.concatenate(([-R], bl[:, 0], pu, br[::-1, 0], [R]))
+            Z = np.concatenate(([0.0], bl[:, 1], pz, br[::-1, 1], [0.0]))
+            ks = float(np.clip(4.0 + 10.0 * r["sigma"], 4.0, 15.0))
+            spl, keep, puz = ChamberTracer._final_fit(U, Z, ks)
+            inner = keep.copy()
+            inner[[0, -1]] = False
+            edge = (np.abs(r["lo"]) > r["half"] - 1.0) | (np.abs(r["hi"]) > r["half"] - 1.0)
+            status, gU, gZ, gkeep, _, _, gres, _, _, gcurve, rms, ef = pass_tail(
+                r["pu"], r["pz"], use, float(R), 40.0, ks, 1.0, r["lo"], r["hi"], float(r["half"]))
+            assert status == 0
+            np.testing.assert_array_equal(gU, U)
+            np.testing.assert_array_equal(gZ, Z)
+            np.testing.assert_array_equal(gkeep, keep)
+            np.testing.assert_allclose(gcurve, puz, rtol=1e-12, atol=1e-12)
+            np.testing.assert_allclose(gres, spl.residuals, rtol=1e-12, atol=1e-12, equal_nan=True)
+            assert rms == pytest.approx(float(np.sqrt(np.mean(spl.residuals[inner] ** 2))), rel=1e-12)
+            assert ef == float(np.mean(edge[use]))
+            checked += 1
+    assert checked >= 2
