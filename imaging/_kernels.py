@@ -1829,44 +1829,51 @@ def direct_ellipse(x, y):
 
 @njit(cache=True, nogil=True)
 def ellipse_arc_volume(xc, yc, a, b, theta, n):
-    """Volume of revolution of an ellipse's arc above z = 0, as an ``n``-point polygon (nan if it does not cross).
+    """Volume of revolution of an ellipse's arc above z = 0, as a polygon (nan if the ellipse does not cross z = 0).
 
-    The polygon ``t = linspace(0, 2 pi, n)`` rolled so the arc above z = 0 is
-    contiguous, then :func:`revolution_halves` (mean of the two halves).
+    ``n`` points ``t = linspace(0, 2 pi, n, endpoint=False)``; the one run of
+    points at or above z = 0 (an ellipse meets a line in at most two points),
+    closed on z = 0 by linear interpolation to the crossings at both ends, then
+    :func:`revolution_halves` (mean of the two halves).
     """
     ct, st = np.cos(theta), np.sin(theta)
     ex = np.empty(n)
     ez = np.empty(n)
     above = np.empty(n, np.bool_)
     n_above = 0
-    last_below = -1
     for i in range(n):
-        t = 2.0 * np.pi * i / (n - 1) if i < n - 1 else 2.0 * np.pi
+        t = 2.0 * np.pi * i / n
         ex[i] = xc + a * np.cos(t) * ct - b * np.sin(t) * st
         ez[i] = yc + a * np.cos(t) * st + b * np.sin(t) * ct
         above[i] = ez[i] >= 0
         if above[i]:
             n_above += 1
-        else:
-            last_below = i
     if n_above == 0 or n_above == n:
         return np.nan
-    start = last_below + 1
+    start = 0
+    for i in range(n):  # the first point of the run: below before it, above at it
+        if not above[i] and above[(i + 1) % n]:
+            start = (i + 1) % n
+            break
     m = 0
     while m < n and above[(start + m) % n]:
         m += 1
-    if m < 3:
-        return np.nan
-    ax = np.empty(m)
-    az = np.empty(m)
+    ax = np.empty(m + 2)
+    az = np.empty(m + 2)
     for j in range(m):
-        ax[j] = ex[(start + j) % n]
-        az[j] = ez[(start + j) % n]
+        ax[j + 1] = ex[(start + j) % n]
+        az[j + 1] = ez[(start + j) % n]
+    for end in range(2):  # the crossings of z = 0: between the run's end point and its neighbour below
+        i_in = start if end == 0 else (start + m - 1) % n
+        i_out = (start - 1) % n if end == 0 else (start + m) % n
+        w = ez[i_in] / (ez[i_in] - ez[i_out])
+        k = 0 if end == 0 else m + 1
+        ax[k] = ex[i_in] + w * (ex[i_out] - ex[i_in])
+        az[k] = 0.0
     ok, meas = revolution_halves(ax, az, True)
     if not ok:
         return np.nan
     return 0.5 * (meas[0] + meas[1])
-
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -1914,6 +1921,35 @@ def profile_ellipse(x, y, n_arc):
         res = ellipse_distance_folded(fx, fy, a, b, 60)
     rms = np.sqrt(np.mean(res * res))
     return 0, a, b, rms, ellipse_arc_volume(xc, yc, a, b, th, n_arc)
+
+
+@njit(cache=True, nogil=True)
+def stored_profile_ellipse(pu, pz, max_points, n_arc):
+    """The extraction's ellipse of a profile's points: ``status, a, b, rms, volume`` (``_store``).
+
+    Nothing (status 3) when the points span 1 px or less in z (``np.ptp``, nan
+    included); else :func:`profile_ellipse` of at most ``max_points`` of them,
+    ``np.linspace(0, n - 1, min(n, max_points)).astype(int)``.
+    """
+    n = pu.shape[0]
+    if n == 0:
+        return 3, np.nan, np.nan, np.nan, np.nan
+    lo = hi = pz[0]
+    for i in range(n):
+        if np.isnan(pz[i]):
+            return 3, np.nan, np.nan, np.nan, np.nan
+        lo = min(lo, pz[i])
+        hi = max(hi, pz[i])
+    if not hi - lo > 1.0:
+        return 3, np.nan, np.nan, np.nan, np.nan
+    m = min(n, max_points)
+    x = np.empty(m)
+    y = np.empty(m)
+    step = (n - 1) / (m - 1) if m > 1 else 0.0
+    for i in range(m):
+        j = int(i * step) if i < m - 1 else n - 1
+        x[i], y[i] = pu[j], pz[j]
+    return profile_ellipse(x, y, n_arc)
 
 
 @njit(cache=True, nogil=True)

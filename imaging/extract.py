@@ -28,7 +28,7 @@ import xarray as xr
 
 from osmobulge import __version__
 from osmobulge.imaging._chamber import FrameView
-from osmobulge.imaging._kernels import arc_resample, compiled_on_disk, ellipse_arc_volume, profile_ellipse
+from osmobulge.imaging._kernels import arc_resample, compiled_on_disk, ellipse_arc_volume, stored_profile_ellipse
 from osmobulge.imaging.geometry import fit_ellipse
 from osmobulge.imaging.trace import FLAGS, ChamberTracer, TraceSettings
 
@@ -465,18 +465,18 @@ def _store(i, res, run, frame, p):
     # the paper's description: an ellipse through the traced points, integrated the same way
     pts_u = res.points_u if len(res.points_u) >= 5 else res.u
     pts_z = res.points_z if len(res.points_z) >= 5 else res.z
-    sel = np.linspace(0, len(pts_u) - 1, min(len(pts_u), 200)).astype(int)
-    if np.ptp(pts_z) > 1.0:
-        eu, ez = np.ascontiguousarray(pts_u[sel], np.float64), np.ascontiguousarray(pts_z[sel], np.float64)
-        status, a, b, rms, vol = profile_ellipse(eu, ez, 721)  # compiled: fit_ellipse and _ellipse_volume
-        if status != 0:  # too few points, no ellipse, or a case only the numpy algebra decides
-            ell = fit_ellipse(np.column_stack((eu, ez)))
-            if ell:
-                (a, b), rms, vol, status = ell.semi_axes, ell.rms, _ellipse_volume(ell), 0
-        if status == 0:
-            scal["ellipse_a"][i], scal["ellipse_b"][i] = a * p, b * p
-            scal["ellipse_rms"][i] = rms * p
-            scal["volume_ellipse"][i] = vol * p**3
+    # (at most 200 of the points, when they span more than 1 px in z; compiled: fit_ellipse and _ellipse_volume)
+    pts_u, pts_z = np.ascontiguousarray(pts_u, np.float64), np.ascontiguousarray(pts_z, np.float64)
+    status, a, b, rms, vol = stored_profile_ellipse(pts_u, pts_z, 200, 721)
+    if status in (1, 2):  # too few points, no ellipse, or a case only the numpy algebra decides
+        sel = np.linspace(0, len(pts_u) - 1, min(len(pts_u), 200)).astype(int)
+        ell = fit_ellipse(np.column_stack((pts_u[sel], pts_z[sel])))
+        if ell:
+            (a, b), rms, vol, status = ell.semi_axes, ell.rms, _ellipse_volume(ell), 0
+    if status == 0:
+        scal["ellipse_a"][i], scal["ellipse_b"][i] = a * p, b * p
+        scal["ellipse_rms"][i] = rms * p
+        scal["volume_ellipse"][i] = vol * p**3
 
 
 def _ellipse_volume(ell):
