@@ -255,6 +255,16 @@ def _span(t, k, n, x):
 
 
 @njit(cache=True, nogil=True)
+def _next_span(t, k, n, x, l, x_prev):
+    """:func:`_span` of ``x`` walking on from span ``l`` of ``x_prev`` (the same span; sorted x: no bisection)."""
+    if not x >= x_prev:  # x went back (or nan): bisect
+        return _span(t, k, n, x)
+    while l + 1 <= n - 1 and t[l + 1] <= x:
+        l += 1
+    return l
+
+
+@njit(cache=True, nogil=True)
 def _basis(t, k, l, x, b, left, right):
     """de Boor-Cox: the k + 1 non-zero B-splines of degree k at x in span l, into ``b`` (work arrays left, right)."""
     b[0] = 1.0
@@ -278,6 +288,7 @@ def _lsq_normal(x, y, t, w, ata, aty):
     b = np.empty(4)
     left = np.empty(4)
     right = np.empty(4)
+    l, x_prev = 3, -np.inf
     for i in range(x.shape[0]):
         wi = w[i] * w[i]
         if wi == 0.0:
@@ -285,7 +296,8 @@ def _lsq_normal(x, y, t, w, ata, aty):
         xi = x[i]
         # span l with t[l] <= x < t[l+1], 3 <= l <= n - 1 (the last point in the last span), and the 4
         # non-zero cubic B-splines N_{l-3..l}(x)
-        l = _span(t, 3, n, xi)
+        l = _next_span(t, 3, n, xi, l, x_prev)
+        x_prev = xi
         _basis(t, 3, l, xi, b, left, right)
         for a in range(4):
             ia = l - 3 + a
@@ -788,9 +800,11 @@ def _bspl_eval(t, c, k, x, out):
     b = np.empty(k + 1)
     left = np.empty(k + 1)
     right = np.empty(k + 1)
+    l, x_prev = k, -np.inf
     for i in range(x.shape[0]):
         xi = x[i]
-        l = _span(t, k, n, xi)
+        l = _next_span(t, k, n, xi, l, x_prev)
+        x_prev = xi
         _basis(t, k, l, xi, b, left, right)
         for d in range(nd):
             s = 0.0
