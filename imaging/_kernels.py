@@ -1371,11 +1371,19 @@ def track_pass(frame, k, gu, gz, x0, y0, d0, d1, n0, n1, step, offsets, polarity
     _sample_transects(frame, k, pts[:, 0].copy(), pts[:, 1].copy(), nrm[:, 0].copy(), nrm[:, 1].copy(), offsets,
                       prof)
     prof = _fill_and_smooth(prof, 1.0 / step)
-    q = signed_profiles(prof, polarity)
-    out = np.empty((5, ns))
-    _band_edges_rows(q, offsets, np.full(ns, m // 2, np.int64), np.full(ns, search, np.int64), min(max(side, 1), m),
-                     out)
     noise = ends_noise(prof)
+    # signed_profiles in place (the smoothed transects are not needed after this)
+    bad = False
+    for i in range(ns):
+        for j in range(m):
+            prof[i, j] = -polarity * prof[i, j]
+            if not np.isfinite(prof[i, j]):
+                bad = True
+    if bad:
+        fill_rows_nanmedian(prof)
+    out = np.empty((5, ns))
+    _band_edges_rows(prof, offsets, np.full(ns, m // 2, np.int64), np.full(ns, search, np.int64),
+                     min(max(side, 1), m), out)
     floor = min_contrast * ref_con
     if 4.0 * noise > floor:
         floor = 4.0 * noise
