@@ -1316,14 +1316,28 @@ def clean_stations(mid, contrast, spx, spy, nx, ny, x0, y0, dirx, diry, nrmx, nr
         dev = np.empty(n)
         devu = np.empty(n_use)
         c = 0
-        for i in range(n):  # ndi.median_filter(filled, win, mode="nearest"), win odd: insertion-sorted window
-            for q in range(win):
-                v = filled[min(max(i + q - h, 0), n - 1)]
-                p = q
-                while p > 0 and buf[p - 1] > v:
+        for i in range(n):  # ndi.median_filter(filled, win, mode="nearest"), win odd: a sorted sliding window
+            if i == 0:
+                for q in range(win):
+                    v = filled[min(max(q - h, 0), n - 1)]
+                    p = q
+                    while p > 0 and buf[p - 1] > v:
+                        buf[p] = buf[p - 1]
+                        p -= 1
+                    buf[p] = v
+            else:  # the sample leaving the window out, the one entering in, the rest stays sorted
+                v_out = filled[min(max(i - 1 - h, 0), n - 1)]
+                v_in = filled[min(max(i + h, 0), n - 1)]
+                p = 0
+                while p < win - 1 and buf[p] != v_out:  # (finite: interpolated from finite midlines)
+                    p += 1
+                while p + 1 < win and buf[p + 1] < v_in:
+                    buf[p] = buf[p + 1]
+                    p += 1
+                while p > 0 and buf[p - 1] > v_in:
                     buf[p] = buf[p - 1]
                     p -= 1
-                buf[p] = v
+                buf[p] = v_in
             dev[i] = abs(mid[i] - buf[h])
             if use[i]:
                 devu[c] = dev[i]

@@ -1099,3 +1099,28 @@ def test_stored_profile_ellipse_subsamples_as_linspace():
     z[7] = np.nan
     assert stored_profile_ellipse(flat, z, 200, 721)[0] == 3  # np.ptp is nan: no ellipse
     assert stored_profile_ellipse(np.zeros(0), np.zeros(0), 200, 721)[0] == 3
+
+
+@pytest.mark.parametrize("n", [11, 14, 15, 16, 40, 333])
+def test_clean_stations_running_median_short_and_tied(n):
+    """The sliding-window median of clean_stations is ndi.median_filter(win 15, nearest): short runs, ties."""
+    from osmobulge.imaging._chamber import _nanmedian
+    from osmobulge.imaging._kernels import clean_stations
+
+    rng = np.random.default_rng(n)
+    for ties in (False, True):
+        mid = rng.normal(0, 1.0, n)
+        if ties:
+            mid = np.round(mid)  # many equal values in every window
+        mid[rng.integers(0, n, max(1, n // 10))] += rng.choice([-6.0, 6.0])  # outliers to reject
+        con = np.full(n, 10.0)
+        x = np.linspace(-500.0, 500.0, n)  # stations on a line far from the rims (R = 10 px at the origin)
+        y = np.full(n, -300.0)
+        zero, one = np.zeros(n), np.ones(n)
+        pu, pz, good, excl, use, _ = clean_stations(mid, con, x, y, zero, -one, 0.0, 0.0, 1.0, 0.0, 0.0, -1.0,
+                                                    10.0, 3.0, 4.0, 1.0, 15)
+        assert good.all() and not excl.any()
+        dev = np.abs(mid - ndi.median_filter(mid, 15, mode="nearest"))
+        want = dev <= max(4.0 * 1.4826 * _nanmedian(dev), 1.0)
+        np.testing.assert_array_equal(use, want)
+        assert not want.all()  # some outliers were rejected
