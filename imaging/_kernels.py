@@ -343,8 +343,12 @@ def lsq_spline(x, y, t, w=None):
     """Cubic least-squares spline: :func:`scipy.interpolate.make_lsq_spline` ``(x, y, t, k=3, w=w)``.
 
     Normal equations in band form with a Cholesky solve (the B-spline basis on
-    knots at data quantiles is well conditioned); falls back to scipy's QR
-    solver when the system is not positive definite (a knot span without data).
+    knots at data quantiles is well conditioned).  When the system is not
+    positive definite (B-splines without data in their support: a gap in the
+    data wider than the knot spacing) the interior knots with no weighted data
+    since the last kept one are dropped (the Schoenberg-Whitney condition) and
+    the fit is repeated, with scipy's QR solver as the last resort; the
+    returned spline's knots are then fewer than ``t``.
 
     Parameters
     ----------
@@ -372,9 +376,38 @@ def lsq_spline(x, y, t, w=None):
     aty = np.zeros((n, y2.shape[1]))
     _lsq_normal(x, y2, t, ww, ata, aty)
     if not _band_cholesky_solve(ata, aty) or not np.all(np.isfinite(aty)):
-        return make_lsq_spline(x, y_in, t, k=3, w=w)
+        t = _supported_knots(x, ww, t)
+        n = len(t) - 4
+        ata = np.zeros((n, 4))
+        aty = np.zeros((n, y2.shape[1]))
+        _lsq_normal(x, y2, t, ww, ata, aty)
+        if not _band_cholesky_solve(ata, aty) or not np.all(np.isfinite(aty)):
+            return make_lsq_spline(x, y_in, t, k=3, w=w)
     # knots and coefficients are valid by construction: skip BSpline's checks (~40 us a call)
     return BSpline.construct_fast(t, aty.reshape((n, *y_in.shape[1:])), 3)
+
+
+def _supported_knots(x, w, t):
+    """Cubic knots ``t`` without the interior ones that have no weighted data since the last kept knot.
+
+    Every knot span then holds data, and the last span too (knots are dropped
+    from the end until it does): the B-splines all have data in their support.
+    """
+    xs = np.sort(x[w > 0])
+    lo, hi = t[3], t[-4]
+    keep = []
+    prev = lo
+    for kn in t[4:-4]:
+        if np.any((xs > prev) & (xs < kn)):
+            keep.append(kn)
+            prev = kn
+    while keep and not np.any((xs > keep[-1]) & (xs < hi)):
+        keep.pop()
+    # the cubic's four coefficients of the end spans need more than one point each: at least 4 points a span
+    # is not required, but n_coef <= the number of distinct points is
+    while keep and len(keep) + 4 > len(np.unique(xs)):
+        keep = keep[::2]
+    return np.r_[[lo] * 4, keep, [hi] * 4]
 
 
 @njit(cache=True, nogil=True)

@@ -54,11 +54,11 @@ def test_spherical_cap_volume_and_area(h_over_a):
     a = 200e-6
     x, z, v, A = cap_curve(a, h_over_a * a)
     m = revolution_measures(x, z)
-    assert m.volume_left == pytest.approx(v, rel=2e-6)
-    assert m.volume_right == pytest.approx(v, rel=2e-6)
-    assert m.area == pytest.approx(A, rel=2e-6)
-    assert m.height == pytest.approx(h_over_a * a, rel=1e-9)
-    assert m.rim_left == pytest.approx(a, rel=1e-9) and m.rim_right == pytest.approx(a, rel=1e-9)
+    assert m.volume_left == pytest.approx(v, rel=2e-6, abs=0)
+    assert m.volume_right == pytest.approx(v, rel=2e-6, abs=0)
+    assert m.area == pytest.approx(A, rel=2e-6, abs=0)
+    assert m.height == pytest.approx(h_over_a * a, rel=1e-9, abs=0)
+    assert m.rim_left == pytest.approx(a, rel=1e-9, abs=0) and m.rim_right == pytest.approx(a, rel=1e-9, abs=0)
     assert m.volume_disagreement < 1e-9
 
 
@@ -66,31 +66,31 @@ def test_beyond_hemisphere_overhangs_and_is_not_a_function():
     x, z, v, _ = cap_curve(1.0, 2.0)
     assert np.abs(x).max() > 1.2  # the curve reaches beyond its rim
     # a z(x) integral over the footprint would count the overhang twice; the curve integral does not
-    assert revolution_measures(x, z).volume == pytest.approx(v, rel=2e-6)
+    assert revolution_measures(x, z).volume == pytest.approx(v, rel=2e-6, abs=0)
 
 
 @pytest.mark.parametrize(("a", "c"), [(1.0, 2.5), (1.0, 1.0), (1.0, 0.3)])  # prolate, sphere, oblate
 def test_half_spheroid(a, c):
     x, z, v = spheroid_curve(a, c)
     m = revolution_measures(x, z)
-    assert v == pytest.approx(2 / 3 * np.pi * a * a * c, rel=1e-12)
-    assert m.volume == pytest.approx(v, rel=2e-6)
-    assert m.area == pytest.approx(half_spheroid_area(a, c), rel=2e-6)
+    assert v == pytest.approx(2 / 3 * np.pi * a * a * c, rel=1e-12, abs=0)
+    assert m.volume == pytest.approx(v, rel=2e-6, abs=0)
+    assert m.area == pytest.approx(half_spheroid_area(a, c), rel=2e-6, abs=0)
 
 
 def test_truncated_prolate_spheroid_beyond_equator():
     x, z, v = spheroid_curve(1.3, 2.0, zc=0.8)  # rim radius < max radius: overhang
     m = revolution_measures(x, z)
-    assert m.volume == pytest.approx(v, rel=2e-6)
-    assert m.rim_left == pytest.approx(1.3 * np.sqrt(1 - 0.16), rel=1e-9)
+    assert m.volume == pytest.approx(v, rel=2e-6, abs=0)
+    assert m.rim_left == pytest.approx(1.3 * np.sqrt(1 - 0.16), rel=1e-9, abs=0)
 
 
 def test_sag_gives_negative_volume_and_open_end_is_closed():
     x, z, v, _ = cap_curve(1.0, 0.3)
-    assert revolution_measures(x, -z).volume == pytest.approx(-v, rel=2e-6)
+    assert revolution_measures(x, -z).volume == pytest.approx(-v, rel=2e-6, abs=0)
     # lift the whole curve by 0.1: closing to z=0 adds the cylinder pi a^2 0.1
     m = revolution_measures(x, z + 0.1)
-    assert m.volume == pytest.approx(v + np.pi * 0.1, rel=2e-6)
+    assert m.volume == pytest.approx(v + np.pi * 0.1, rel=2e-6, abs=0)
 
 
 def test_flat_and_disk_area():
@@ -103,8 +103,8 @@ def test_left_right_disagreement_detects_asymmetry():
     x, z, _, _ = cap_curve(1.0, 1.0)
     z2 = np.where(x > 0, 1.1 * z, z)
     m = revolution_measures(x, z2)
-    assert m.volume_right / m.volume_left == pytest.approx(1.1, rel=1e-6)
-    assert m.volume_disagreement == pytest.approx(0.1 / 1.05, rel=1e-4)
+    assert m.volume_right / m.volume_left == pytest.approx(1.1, rel=1e-6, abs=0)
+    assert m.volume_disagreement == pytest.approx(0.1 / 1.05, rel=1e-4, abs=0)
 
 
 def test_split_halves_orders_and_validates():
@@ -130,12 +130,12 @@ def test_spline_of_noisy_points_recovers_volume_and_area(h_over_a):
     spl = smooth_profile(np.c_[xn, zn], sigma=0.5 * np.sqrt(2))
     s, p = spl.sample(step=0.5)
     m = revolution_measures(p[:, 0], p[:, 1])
-    assert m.volume == pytest.approx(v, rel=0.01)
-    assert m.area == pytest.approx(A, rel=0.01)
-    assert spl.rms == pytest.approx(0.5 * np.sqrt(2), rel=0.2)
+    assert m.volume == pytest.approx(v, rel=0.01, abs=0)
+    assert m.area == pytest.approx(A, rel=0.01, abs=0)
+    assert spl.rms == pytest.approx(0.5 * np.sqrt(2), rel=0.2, abs=0)
     # arc length of the cap: 2 R phi_max
     R = (a * a + (h_over_a * a) ** 2) / (2 * h_over_a * a)
-    assert spl.length == pytest.approx(2 * R * np.arccos((R - h_over_a * a) / R), rel=0.01)
+    assert spl.length == pytest.approx(2 * R * np.arccos((R - h_over_a * a) / R), rel=0.01, abs=0)
 
 
 def test_spline_arc_length_parameterisation_and_tangent():
@@ -174,7 +174,7 @@ def test_ellipse_fit_recovers_known_ellipse(center, axes, angle, arc):
     assert fit
     np.testing.assert_allclose(fit.center, center, atol=0.02 * max(axes))
     np.testing.assert_allclose(sorted(fit.semi_axes), sorted(axes), rtol=0.02)
-    assert fit.rms == pytest.approx(sig * np.sqrt(2) * 0.7, rel=0.5)  # normal part of isotropic noise
+    assert fit.rms == pytest.approx(sig * np.sqrt(2) * 0.7, rel=0.5, abs=0)  # normal part of isotropic noise
     on = fit.points(np.linspace(0, 2 * np.pi, 7))
     assert on.shape == (7, 2)
 
@@ -333,4 +333,4 @@ def test_chamber_frame_undoes_tilt(tilt_deg):
     xx, zz = to_chamber_frame(np.c_[col, row], axis_point=(500, 400), angle=th)
     np.testing.assert_allclose(xx, x, atol=1e-9)
     np.testing.assert_allclose(zz, z, atol=1e-9)
-    assert revolution_measures(xx, zz).volume == pytest.approx(v, rel=1e-5)
+    assert revolution_measures(xx, zz).volume == pytest.approx(v, rel=1e-5, abs=0)

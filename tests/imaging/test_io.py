@@ -54,7 +54,7 @@ def test_round_trip_16_bit(tmp_path, frames16, fmt):
         assert s.shape == frames16.shape
         assert s.dtype == np.uint16
         np.testing.assert_array_equal(_stack(s), frames16)
-        assert s.pixel_size == pytest.approx(PX, rel=1e-4)
+        assert s.pixel_size == pytest.approx(PX, rel=1e-4, abs=0)
         assert s.metadata_source == {"pixel_size": "file", "timestamps": "file"}
         if fmt == "tiff":  # ImageJ stores one frame interval
             np.testing.assert_allclose(s.timestamps, np.arange(5) * np.median(np.diff(times)))
@@ -85,7 +85,7 @@ def test_jpeg_round_trip_is_close(tmp_path, frames8):
         assert s.dtype == np.uint8
         assert np.abs(_stack(s).astype(int) - smooth).max() <= 6  # lossy
         np.testing.assert_allclose(s.timestamps, np.arange(5) * 30.0)
-        assert s.pixel_size == pytest.approx(PX, rel=1e-4)
+        assert s.pixel_size == pytest.approx(PX, rel=1e-4, abs=0)
     with pytest.raises(ValueError, match="8-bit"):
         write_series(np.zeros((1, 8, 8), np.uint16), tmp_path / "j16", fmt="jpeg", pixel_size=PX)
 
@@ -120,7 +120,7 @@ def test_metadata_conflicts_raise(tmp_path, frames16):
         open_series(path, timestamps=np.arange(5) * 61.0)
     # agreeing values are fine, within rtol
     with open_series(path, pixel_size=PX * (1 + 1e-5), frame_interval=60.0) as s:
-        assert s.pixel_size == pytest.approx(PX, rel=1e-6)
+        assert s.pixel_size == pytest.approx(PX, rel=1e-6, abs=0)
 
 
 def test_missing_metadata_names_what_to_set(tmp_path, frames16):

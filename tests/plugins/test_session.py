@@ -26,9 +26,9 @@ def test_session_opens_the_folder(experiment):
     s = CurationSession(folder)
     assert s.n_frames == truth.sizes["time"]
     assert s.shape == tuple(truth.attrs.get("shape", s.shape))
-    assert s.pixel_size == pytest.approx(PIXEL)
+    assert s.pixel_size == pytest.approx(PIXEL, rel=1e-9, abs=0)
     np.testing.assert_allclose(s.times, np.arange(s.n_frames) * INTERVAL_MIN * 60)
-    assert s.chamber_volume == pytest.approx(V0)
+    assert s.chamber_volume == pytest.approx(V0, rel=1e-9, abs=0)
     np.testing.assert_array_equal(s.frame(2), np.asarray(s.frames[2]))
     assert s.curation.revision == 0 and not s.picks
     with pytest.raises(ValueError, match=r"frame = 99: expected an integer in \[0, 5\]"):
@@ -44,7 +44,7 @@ def test_pick_accept_saves_manual_profile_with_its_volume(experiment):
     # rim placed from the picked ends: within 2 % or a 0.5 px layer over the well
     tol = max(0.02 * true_v, np.pi * CHAMBER[0] ** 2 * 0.5 * PIXEL)
     assert abs(fit.volume - true_v) < tol
-    assert fit.area == pytest.approx(float(truth["area_ratio"].values[BAD]) * np.pi * CHAMBER[0] ** 2, rel=0.03)
+    assert fit.area == pytest.approx(float(truth["area_ratio"].values[BAD]) * np.pi * CHAMBER[0] ** 2, rel=0.03, abs=0)
     s.accept(BAD, by="tester")
     on_disk = load_curation(folder)
     prof = on_disk.manual_profiles[BAD]
@@ -67,7 +67,7 @@ def test_reopen_finds_the_manual_profile(experiment):
     s2 = CurationSession(folder)
     assert s2.is_manual(BAD)
     np.testing.assert_allclose(s2.picks[BAD], fit.points_rc, atol=1e-9)
-    assert s2.manual_fit(BAD).volume == pytest.approx(fit.volume, rel=1e-9)
+    assert s2.manual_fit(BAD).volume == pytest.approx(fit.volume, rel=1e-9, abs=0)
 
 
 def test_exclude_include_time_origin_regions(experiment):
@@ -125,7 +125,7 @@ def test_points_export_import_round_trip(experiment, tmp_path):
         assert s2.import_points(path) == [2, 4]
         for f in (2, 4):
             np.testing.assert_allclose(s2.picks[f], s.picks[f], atol=1e-4)
-            assert s2.fit(f).volume == pytest.approx(s.fit(f).volume, rel=1e-5)
+            assert s2.fit(f).volume == pytest.approx(s.fit(f).volume, rel=1e-5, abs=0)
 
 
 @pytest.mark.slow
