@@ -298,13 +298,21 @@ def _coarse(frame, f):
     return block_mean(native_frame(np.ascontiguousarray(frame)), int(f))
 
 
-def detect_orientation(frame):
+def smoothed_coarse(frame):
+    """The frame as the band searches see it: block means (``min(H, W) // 256`` px), Gaussian sigma 1 (float32)."""
+    f = max(1, min(frame.shape) // 256)
+    return ndi.gaussian_filter(_coarse(frame, f), 1.0)
+
+
+def detect_orientation(frame, *, coarse=None):
     """Bulge direction of a (flat-membrane) frame: the side of the straight membrane band away from the wells.
 
     Parameters
     ----------
     frame : ndarray of shape (H, W)
         A frame, ideally the first (flat membrane) of a series.
+    coarse : ndarray, optional
+        ``smoothed_coarse(frame)`` when already computed.
 
     Returns
     -------
@@ -313,8 +321,7 @@ def detect_orientation(frame):
     score : float
         Ratio of the well-wall evidence on the base side to the other side (> 1).
     """
-    f = max(1, min(frame.shape) // 256)
-    img = ndi.gaussian_filter(_coarse(frame, f), 1.0)
+    img = smoothed_coarse(frame) if coarse is None else coarse
     best = None
     for k in (0, 1):  # band horizontal in the view rotated by k
         v = np.rot90(img, k)
@@ -559,7 +566,7 @@ def _well_intervals(profile, ratio_levels):
     return list(zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1), strict=True))
 
 
-def find_chambers(view, *, thickness=None, min_width=20, chamber=None):
+def find_chambers(view, *, thickness=None, min_width=20, chamber=None, coarse=None):
     """Detect the flat membrane line and every well in a frame (bulge-up view).
 
     Parameters
@@ -574,6 +581,8 @@ def find_chambers(view, *, thickness=None, min_width=20, chamber=None):
         Which well: index from the left, or ``(col0, col1)`` view columns
         containing its axis; default the well nearest the view centre whose
         walls are both inside the view.
+    coarse : ndarray, optional
+        ``smoothed_coarse`` of the view (``np.rot90(view.frame, view.k)``) when already computed.
 
     Returns
     -------
@@ -587,7 +596,7 @@ def find_chambers(view, *, thickness=None, min_width=20, chamber=None):
     """
     h, w = view.shape
     f = max(1, min(h, w) // 256)
-    img = ndi.gaussian_filter(_coarse(np.rot90(view.frame, view.k), f), 1.0)
+    img = smoothed_coarse(np.rot90(view.frame, view.k)) if coarse is None else coarse
     rows, val = _ridge_rows(img)
     cols = np.arange(img.shape[1]).astype(float)
     a, b, _, ok = _robust_line(cols, rows.astype(float), floor=1.5)

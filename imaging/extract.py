@@ -585,24 +585,22 @@ def _dataset(run, times, p, chamber_attrs, src, settings, bulge_direction, chamb
     attrs.update(settings.to_attrs())
     attrs.update(chamber_attrs)
     attrs.update(_safe_attrs(metadata, "meta_"))
-    ds = xr.Dataset(data, coords=coords, attrs=attrs)
     # lambda_pre(Vtilde): second-order polynomial through (0, 1) (supplement Sec. 5.7)
     fit_ok = ok & np.isfinite(vtilde) & np.isfinite(lam) & (vtilde >= 0)
     if do_fit and fit_ok.sum() >= 3 and np.ptp(vtilde[fit_ok]) > 0:
         from osmobulge.modeling.prestretch import fit_prestretch as _fit
 
         pre = _fit(vtilde[fit_ok], lam[fit_ok])
-        ds["lambda_pre_fit"] = var(pre(np.clip(vtilde, 0, None)), "1",
-                                   "fitted rim pre-stretch 1 + c1 Vtilde + c2 Vtilde^2 (supplement Sec. 5.7)")
-        ds.attrs["prestretch_c1"] = float(pre.c1)
-        ds.attrs["prestretch_c2"] = float(pre.c2)
-        ds.attrs["prestretch_frames"] = int(fit_ok.sum())
+        data["lambda_pre_fit"] = var(pre(np.clip(vtilde, 0, None)), "1",
+                                     "fitted rim pre-stretch 1 + c1 Vtilde + c2 Vtilde^2 (supplement Sec. 5.7)")
+        attrs["prestretch_c1"] = float(pre.c1)
+        attrs["prestretch_c2"] = float(pre.c2)
     else:
-        ds["lambda_pre_fit"] = var(np.full(n, np.nan), "1", "fitted rim pre-stretch (not enough good frames)")
-        ds.attrs["prestretch_c1"] = np.nan
-        ds.attrs["prestretch_c2"] = np.nan
-        ds.attrs["prestretch_frames"] = int(fit_ok.sum())
-    return ds
+        data["lambda_pre_fit"] = var(np.full(n, np.nan), "1", "fitted rim pre-stretch (not enough good frames)")
+        attrs["prestretch_c1"] = np.nan
+        attrs["prestretch_c2"] = np.nan
+    attrs["prestretch_frames"] = int(fit_ok.sum())
+    return xr.Dataset(data, coords=coords, attrs=attrs)
 
 
 # ------------------------------------------------------------------------------------ save / load

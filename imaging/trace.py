@@ -58,6 +58,7 @@ from osmobulge.imaging._chamber import (
     find_chambers,
     measure_line,
     measure_walls,
+    smoothed_coarse,
 )
 from osmobulge.imaging._kernels import (
     abs_percentile,
@@ -235,12 +236,16 @@ class ChamberTracer:
         if frame.ndim != 2:
             raise ValueError(f"frames must be 2-D (H, W), got shape {frame.shape}")
         self.settings = settings or TraceSettings()
+        coarse = None
         if bulge_direction == "auto":
-            bulge_direction, _ = detect_orientation(frame)
+            coarse = smoothed_coarse(frame)
+            bulge_direction, _ = detect_orientation(frame, coarse=coarse)
         self.bulge_direction = bulge_direction
         self.k = ROTATIONS[bulge_direction]
         view = FrameView(frame, self.k)
-        self.ref = find_chambers(view, thickness=thickness, chamber=chamber_region)
+        # the band search sees the bulge-up view: the orientation's coarse image is that view when unrotated
+        self.ref = find_chambers(view, thickness=thickness, chamber=chamber_region,
+                                 coarse=coarse if self.k == 0 else None)
         self.shape = frame.shape
         g = self.ref
         # registration patch: the base under the membrane around the well (no dome)
