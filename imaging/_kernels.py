@@ -8,7 +8,10 @@ cleaning and rim bridges, the coarse wall search, dusty wall rows, the
 orientation's ridge filter and block means, solids of revolution, the
 ellipse's scatter sums, point distances and arc volume (and the stored
 profile's ellipse and arc-length resampling in one call each), the rim contact
-figure, nan medians, percentiles and run lengths.
+figure, nan medians, percentiles and run lengths.  A tracked frame takes a
+handful of calls: its flat line (``line_band``), both walls
+(``locate_walls``), its pass (``track_pass``) and the pass's end with the final
+spline (``pass_tail``).
 
 Each kernel does what a short numpy/scipy expression or a former numpy function
 does (named in its docstring, and checked against it in
