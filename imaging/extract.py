@@ -259,7 +259,12 @@ def extract(
 
     # -- the tracers: one per chamber ------------------------------------------------------------
     first = src[0]
-    tracers = _tracers(first, bulge_direction, chamber_region, settings)
+    try:
+        tracers = _tracers(first, bulge_direction, chamber_region, settings)
+    except ValueError as err:
+        raise ValueError(f"{err} -- the chamber is found in the first frame, which must show the flat membrane "
+                         f"(a series that starts with the dome already grown, e.g. the second file of a split "
+                         f"series, cannot be measured on its own)") from err
     view = FrameView(first, tracers[0].k)
     if len(tracers) == 1:
         parts_p, parts_m = [priors_px], [manual_px]
@@ -306,6 +311,17 @@ def extract(
     finally:
         if bar is not None:
             bar.stop()
+    for c, run in enumerate(runs):
+        # the chamber (flat line, rim, well) is found in the first frame: a dome already standing there can
+        # bend it (measured: from Vtilde ~0.1 on the search fails, at 0.4 the rim came out 5 px narrow)
+        h0 = run.scal["bulge_height"][0] / p
+        R0 = run.tracer.ref.rim_radius
+        if np.isfinite(h0) and h0 > FIRST_FRAME_HEIGHT * R0:
+            where = f"chamber {c}: " if len(runs) > 1 else ""
+            warnings.warn(f"{where}the first frame's dome already stands {h0:.0f} px ({h0 / R0:.2f} of the rim "
+                          f"radius) above the flat membrane; the chamber is found in the first frame, which must "
+                          f"show the flat membrane: rim radius, volumes and lambda_pre may be wrong",
+                          UserWarning, stacklevel=2)
 
     parts = [_dataset(r, times, p, chamber_attrs, src, settings, bulge_direction, chamber_region, errors, metadata,
                       fit_prestretch) for r in runs]
@@ -336,6 +352,11 @@ def _tracers(first, bulge_direction, chamber_region, settings):
                 continue
             found.append((t.ref.line.x0, t))
     return [t for _, t in sorted(found, key=lambda x: x[0])]
+
+
+#: first-frame dome height, as a fraction of the rim radius, above which extract warns (the first frame
+#: must show the flat membrane; a first frame at Vtilde 0.05, height 0.1 a, still measures within 0.2 %)
+FIRST_FRAME_HEIGHT = 0.2
 
 
 class _Run:

@@ -1,6 +1,7 @@
 """extract(): synthetic series -> SI Dataset, save/load round trips, manual input, end-to-end permeability."""
 
 import importlib
+import warnings
 
 import numpy as np
 import pytest
@@ -303,3 +304,27 @@ def test_a_well_at_the_field_edge_is_left_out_not_fatal():
     ds = extract(s.frames, pixel_size=1e-6, frame_interval=600.0, chamber=CH, progress=False, chamber_region="all")
     assert ds.sizes["chamber"] == 2 and (ds.flag == "ok").all()
     np.testing.assert_allclose(ds.vtilde.isel(time=1).values, [0.25, 0.5], atol=0.02)
+
+
+def test_a_first_frame_that_is_not_flat_is_an_error_or_a_warning():
+    """The chamber is found in frame 0: a dome already grown there is said, never silently measured.
+
+    Small chamber (a = 100 px in a 440 px field): from Vtilde 0.1 the band search fails (an error naming the
+    cause); at Vtilde 0.4 it succeeds with a wrong rim (a warning with the dome's height); at 0.05 all is well.
+    """
+    small = {"chamber": (100e-6, 50e-6, 10e-6), "shape": (420, 440), "pixel_size": 1e-6}
+
+    def run(start):
+        s = render_series([start, start + 0.1, start + 0.2], seed=0, nuisances=Nuisances(noise_sigma=0.01), **small)
+        return s, extract(s.frames, pixel_size=1e-6, frame_interval=600.0, progress=False)
+
+    with pytest.raises(ValueError, match="must show the flat membrane"):
+        run(0.1)
+    with pytest.warns(UserWarning, match="first frame's dome already stands"):
+        run(0.4)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # no warning at all
+        s, ds = run(0.05)
+    assert list(ds.flag.values) == ["ok"] * 3
+    np.testing.assert_allclose(ds.volume, s.truth.volume, rtol=0.01)
+    np.testing.assert_allclose(ds.rim_radius, s.truth.rim_radius, atol=0.5e-6)
