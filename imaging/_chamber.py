@@ -40,8 +40,8 @@ from osmobulge.imaging._kernels import (
     wall_rows,
 )
 
-__all__ = ["FrameView", "Line", "Well", "ChamberGeometry", "ROTATIONS", "detect_orientation", "find_chambers",
-           "measure_line", "measure_walls", "band_edges", "step_crossing"]
+__all__ = ["FrameView", "Line", "Well", "ChamberGeometry", "ChamberNotFound", "ROTATIONS", "detect_orientation",
+           "find_chambers", "measure_line", "measure_walls", "band_edges", "step_crossing"]
 
 #: half-width (px) of the rows across a wall: side levels 7 px and more from the edge (see ``_kernels.WALL_SIDE``)
 WALL_WINDOW = 11.0
@@ -192,6 +192,10 @@ class ChamberGeometry:
     @property
     def axis_point(self):
         return np.array([self.line.x0, self.line.y0])
+
+
+class ChamberNotFound(ValueError):
+    """The frame shows no chamber the search recognises (no flat band, no well, no walls)."""
 
 
 # ---------------------------------------------------------------------------------- 1-D helpers
@@ -601,7 +605,8 @@ def find_chambers(view, *, thickness=None, min_width=20, chamber=None, coarse=No
     cols = np.arange(img.shape[1]).astype(float)
     a, b, _, ok = _robust_line(cols, rows.astype(float), floor=1.5)
     if not np.isfinite(a) or ok.mean() < 0.3:
-        raise ValueError("no straight membrane band found across the frame (is the membrane flat in the first frame?)")
+        raise ChamberNotFound("no straight membrane band found across the frame "
+                              "(is the membrane flat in the first frame?)")
     polarity = 1 if np.median(val[ok]) > 0 else -1
     # coarse -> full-resolution line (coarse pixel centres at f*i + (f-1)/2)
     ang = float(np.arctan(b))
@@ -634,7 +639,7 @@ def find_chambers(view, *, thickness=None, min_width=20, chamber=None, coarse=No
     mag = np.abs(ratio)
     hi = np.percentile(mag, 90)
     if hi < 0.02:
-        raise ValueError("no wells found: the strip under the membrane has the grey level of the water everywhere")
+        raise ChamberNotFound("no wells found: the strip under the membrane has the grey level of the water everywhere")
     liquid = mag < 0.5 * hi
     # runs too short to be a well are dropped (a speck beside a wall looks like liquid), then runs closer
     # than two membrane thicknesses are one well (a speck on the strip splits a well; the base between two
@@ -649,7 +654,7 @@ def find_chambers(view, *, thickness=None, min_width=20, chamber=None, coarse=No
             runs.append((s_, e_))
     inside = [(s, e) for s, e in runs if s > 0 and e < len(ucol)]
     if not runs:
-        raise ValueError("no wells found under the membrane band")
+        raise ChamberNotFound("no wells found under the membrane band")
     wells = []
     for s, e in runs:
         wells.append(Well(float(ucol[s] - 0.5), float(ucol[e - 1] + 0.5)))
@@ -691,7 +696,7 @@ def find_chambers(view, *, thickness=None, min_width=20, chamber=None, coarse=No
     target = replace(target, depth=depth)
     target, wall_rms = measure_walls(view, line, target, thickness=thickness, window=WALL_WINDOW)
     if target is None:
-        raise ValueError("the well walls could not be located")
+        raise ChamberNotFound("the well walls could not be located")
     ax = target.centre
     line = line.shifted(ax, 0.0)
     others = tuple(Well(wl.u_left - ax, wl.u_right - ax) for wl in wells if abs(wl.centre - ax) > target.half_width)

@@ -378,7 +378,10 @@ def lsq_spline(x, y, t, w=None):
     ata = np.zeros((n, 4))
     aty = np.zeros((n, y2.shape[1]))
     _lsq_normal(x, y2, t, ww, ata, aty)
-    if not _band_cholesky_solve(ata, aty) or not np.all(np.isfinite(aty)):
+    xw = x[ww > 0]
+    n_distinct = int(np.count_nonzero(np.diff(xw) > 0)) + 1 if len(xw) else 0
+    # more coefficients than distinct points is singular, even when rounding lets the Cholesky factor through
+    if n > n_distinct or not _band_cholesky_solve(ata, aty) or not np.all(np.isfinite(aty)):
         t = _supported_knots(x, ww, t)
         n = len(t) - 4
         ata = np.zeros((n, 4))
@@ -406,10 +409,10 @@ def _supported_knots(x, w, t):
             prev = kn
     while keep and not np.any((xs > keep[-1]) & (xs < hi)):
         keep.pop()
-    # the cubic's four coefficients of the end spans need more than one point each: at least 4 points a span
-    # is not required, but n_coef <= the number of distinct points is
-    while keep and len(keep) + 4 > len(np.unique(xs)):
-        keep = keep[::2]
+    # no more coefficients than distinct points: an even subset of the kept knots (none: one cubic)
+    n_inner = max(len(np.unique(xs)) - 4, 0)
+    if len(keep) > n_inner:
+        keep = [keep[i] for i in np.unique(np.round(np.linspace(0, len(keep) - 1, n_inner)).astype(int))]
     return np.r_[[lo] * 4, keep, [hi] * 4]
 
 

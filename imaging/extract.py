@@ -27,7 +27,7 @@ import numpy as np
 import xarray as xr
 
 from osmobulge import __version__
-from osmobulge.imaging._chamber import FrameView
+from osmobulge.imaging._chamber import ChamberNotFound, FrameView
 from osmobulge.imaging._kernels import arc_resample, compiled_on_disk, ellipse_arc_volume, stored_profile_ellipse
 from osmobulge.imaging.geometry import fit_ellipse
 from osmobulge.imaging.trace import FLAGS, ChamberTracer, TraceSettings
@@ -261,8 +261,8 @@ def extract(
     first = src[0]
     try:
         tracers = _tracers(first, bulge_direction, chamber_region, settings)
-    except ValueError as err:
-        raise ValueError(f"{err} -- the chamber is found in the first frame, which must show the flat membrane "
+    except ChamberNotFound as err:  # (not a bad chamber_region: that error says so itself)
+        raise ChamberNotFound(f"{err} -- the chamber is found in the first frame, which must show the flat membrane "
                          f"(a series that starts with the dome already grown, e.g. the second file of a split "
                          f"series, cannot be measured on its own)") from err
     view = FrameView(first, tracers[0].k)

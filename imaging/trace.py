@@ -371,7 +371,7 @@ class ChamberTracer:
 
     def _wall_rows_at(self, depth):
         """Rows and offsets of the coarse wall search and of the wall fits (cached: the same every frame)."""
-        key = float(depth)
+        key = float(depth) if np.isfinite(depth) else None  # (nan keys never match: one entry a call)
         cache = self._wall_grid
         if key not in cache:
             g0 = self.ref

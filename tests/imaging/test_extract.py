@@ -328,3 +328,10 @@ def test_a_first_frame_that_is_not_flat_is_an_error_or_a_warning():
     assert list(ds.flag.values) == ["ok"] * 3
     np.testing.assert_allclose(ds.volume, s.truth.volume, rtol=0.01)
     np.testing.assert_allclose(ds.rim_radius, s.truth.rim_radius, atol=0.5e-6)
+
+
+def test_a_bad_chamber_choice_is_not_blamed_on_the_first_frame(series):
+    """The flat-membrane hint is added to chamber-search failures only, not to a bad chamber_region."""
+    with pytest.raises(ValueError, match="out of range") as info:
+        extract(series.frames[:2], pixel_size=1e-6, frame_interval=600.0, chamber_region=7, progress=False)
+    assert "flat membrane" not in str(info.value)

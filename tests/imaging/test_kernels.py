@@ -1134,3 +1134,18 @@ def test_clean_stations_running_median_short_and_tied(n):
         want = dev <= max(4.0 * 1.4826 * _nanmedian(dev), 1.0)
         np.testing.assert_array_equal(use, want)
         assert not want.all()  # some outliers were rejected
+
+
+def test_lsq_spline_with_as_few_distinct_points_as_coefficients():
+    """Four distinct weighted points and interior knots: one cubic through them (it once looped forever)."""
+    from osmobulge.imaging._kernels import lsq_spline
+
+    x = np.linspace(0, 1, 20)
+    w = np.r_[1, 1, [0] * 16, 1, 1]
+    t = np.r_[[0.0] * 4, 0.25, 0.5, 0.75, [1.0] * 4]
+    spl = lsq_spline(x, x**2, t, w)
+    np.testing.assert_allclose(spl(x), x**2, rtol=0, atol=1e-9)  # x^2 is a cubic: reproduced exactly
+    for n_w in (5, 6, 9):  # a few more points: some interior knots stay
+        w = np.zeros(20)
+        w[np.r_[0:2, 20 - (n_w - 2):20]] = 1.0
+        np.testing.assert_allclose(lsq_spline(x, x**2, t, w)(x), x**2, rtol=0, atol=1e-9)

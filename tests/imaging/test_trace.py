@@ -312,3 +312,16 @@ def test_dust_beside_a_wall_is_not_part_of_the_well():
     g = find_chambers(FrameView(frame.astype(np.uint16), 0))
     assert g.rim_radius == pytest.approx(100.0, abs=0.3)
     assert g.line.x0 == pytest.approx(220.0, abs=0.3)
+
+
+def test_wall_grid_cache_holds_one_entry_for_an_unknown_depth():
+    """A nan well depth (too few depths measured) is one cache key, not a new entry every frame."""
+    from osmobulge.imaging.synthetic import render_frame
+    from osmobulge.imaging.trace import ChamberTracer
+
+    tr = ChamberTracer(render_frame(0.0, chamber=(100e-6, 50e-6, 10e-6), shape=(420, 440), seed=0))
+    for _ in range(5):
+        tr._wall_rows_at(np.float64(np.nan))
+        tr._wall_rows_at(float("nan"))
+    tr._wall_rows_at(tr.ref.well.depth)
+    assert len(tr._wall_grid) == (1 if not np.isfinite(tr.ref.well.depth) else 2)
