@@ -1425,15 +1425,7 @@ def track_pass(frame, k, gu, gz, x0, y0, d0, d1, n0, n1, step, offsets, polarity
                       prof)
     prof = _fill_and_smooth(prof, 1.0 / step)
     noise = ends_noise(prof)
-    # signed_profiles in place (the smoothed transects are not needed after this)
-    bad = False
-    for i in range(ns):
-        for j in range(m):
-            prof[i, j] = -polarity * prof[i, j]
-            if not np.isfinite(prof[i, j]):
-                bad = True
-    if bad:
-        fill_rows_nanmedian(prof)
+    _signed_into(prof, polarity, prof)  # signed_profiles in place (the smoothed transects are not needed after)
     out = np.empty((5, ns))
     _band_edges_rows(prof, offsets, np.full(ns, m // 2, np.int64), np.full(ns, search, np.int64),
                      min(max(side, 1), m), out)
@@ -1452,12 +1444,15 @@ def track_pass(frame, k, gu, gz, x0, y0, d0, d1, n0, n1, step, offsets, polarity
 
 @njit(cache=True, nogil=True)
 def rim_bridge(pu, pz, R, side, reach):
-    """Points bridging the untraceable foot of the dome to one rim (``ChamberTracer._bridge``), compiled.
+    """Points bridging the untraceable foot of the dome (merged with the flat band) to one rim.
 
-    The direction ``theta(rho)`` of the points seen from the rim point,
-    least-squares linear in the distance ``rho`` over the nearest ``reach`` px
-    (unwrapped), filled every px from the rim out to the nearest point.
-    Returns an (M, 2) array of ``(u, z)``.
+    The direction ``theta(rho)`` of the traced points seen from the rim point
+    ``(side R, 0)`` (``side`` -1 left, +1 right), least-squares linear in the
+    distance ``rho`` (a curve leaving the rim at an angle with a curvature)
+    over the nearest ``reach`` px of them (unwrapped; the angle measured from
+    the outward direction, -u on the left and +u on the right, towards +z),
+    filled every px from the rim out to the nearest point.  Returns an
+    (M, 2) array of ``(u, z)`` (chamber px); used by :func:`pass_tail`.
     """
     n = pu.shape[0]
     if n == 0:
@@ -2374,10 +2369,9 @@ def block_mean(frame, f):
 
 
 @njit(cache=True, nogil=True)
-def signed_profiles(prof, polarity):
-    """``polarity * -prof`` (the band high), each row's non-finite samples -> its finite median (0 if none)."""
+def _signed_into(prof, polarity, q):
+    """``q = polarity * -prof``, each row's non-finite samples -> its finite median (0 if none); ``q`` may be prof."""
     n, k = prof.shape
-    q = np.empty((n, k))
     bad = False
     for i in range(n):
         for j in range(k):
@@ -2387,6 +2381,12 @@ def signed_profiles(prof, polarity):
     if bad:
         fill_rows_nanmedian(q)
     return q
+
+
+@njit(cache=True, nogil=True)
+def signed_profiles(prof, polarity):
+    """``polarity * -prof`` (the band high), each row's non-finite samples -> its finite median (0 if none)."""
+    return _signed_into(prof, polarity, np.empty(prof.shape))
 
 
 

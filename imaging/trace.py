@@ -73,7 +73,6 @@ from osmobulge.imaging._kernels import (
     lsq_spline,
     native_frame,
     pass_tail,
-    rim_bridge,
     rim_contact,
     rim_zone,
     robust_profile_spline,
@@ -87,6 +86,7 @@ __all__ = ["TraceSettings", "FrameTrace", "ChamberTracer", "FLAGS", "trace_serie
 #: quality flags, in order of precedence
 FLAGS = ("ok", "no_membrane", "delaminated", "fractured", "touching", "poor_fit")
 
+_BRIDGE_REACH = 40.0  # px of trusted points nearest a rim that set its bridge (_kernels.rim_bridge)
 _RIM_FRACTIONS = np.linspace(0.02, 0.1, 9)  # rim contact: the band just outside the rim, R (1 + f) from the axis
 
 
@@ -698,19 +698,6 @@ class ChamberTracer:
         r.update(pu=pu, pz=pz, good=good, excluded=excl, use=use, sigma=float(np.clip(sigma, 0.01, 3.0)))
         return r
 
-    def _bridge(self, g, pu, pz, side, reach=40.0):
-        """Points bridging the untraceable foot of the dome (merged with the flat band) to the rim.
-
-        Fits the direction ``theta(rho)`` of the traced points seen from the rim
-        point, linear in the distance ``rho`` (a curve leaving the rim at an
-        angle with a curvature), over the nearest ``reach`` px of trusted points,
-        and fills the gap from the rim out to them (compiled:
-        :func:`~osmobulge.imaging._kernels.rim_bridge`; the angle is measured
-        from the outward direction, -u on the left and +u on the right, towards +z).
-        """
-        return rim_bridge(np.ascontiguousarray(pu, np.float64), np.ascontiguousarray(pz, np.float64),
-                          float(g.rim_radius), float(side), float(reach))
-
     @staticmethod
     def _lsq(u, pts, w, spacing):
         """Least-squares cubic spline of pts (N, 2) over parameter u with knots at data quantiles."""
@@ -842,8 +829,8 @@ class ChamberTracer:
         # (the scipy solver takes over when a band system is singular, as in _final_fit)
         status, U, Z, keep, _, _, res, _, _, puz, rms, edge_fraction = pass_tail(
             np.ascontiguousarray(r["pu"], np.float64), np.ascontiguousarray(r["pz"], np.float64), use, float(R),
-            40.0, ks, 1.0, np.ascontiguousarray(r["lo"], np.float64), np.ascontiguousarray(r["hi"], np.float64),
-            float(r["half"]))
+            _BRIDGE_REACH, ks, 1.0, np.ascontiguousarray(r["lo"], np.float64),
+            np.ascontiguousarray(r["hi"], np.float64), float(r["half"]))
         if status != 0:
             spl, keep, puz = self._final_fit(U, Z, ks)
             res = spl.residuals

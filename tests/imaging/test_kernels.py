@@ -639,6 +639,7 @@ def test_clean_and_bridge_equal_numpy_reference(seed):
     from dataclasses import replace
 
     rng = np.random.default_rng(seed)
+    from osmobulge.imaging._kernels import rim_bridge
     from osmobulge.imaging.synthetic import render_series
     from osmobulge.imaging.trace import trace_series
 
@@ -665,31 +666,22 @@ def test_clean_and_bridge_equal_numpy_reference(seed):
     for side in (-1.0, 1.0):
         for sub in (slice(None), slice(0, 3)):  # the line fit, and fewer than 4 points (the median angle)
             b_ref = _ref_bridge(g.rim_radius, pu[sub], pz[sub], side)
-            b = tr._bridge(g, pu[sub], pz[sub], side)
+            b = rim_bridge(pu[sub], pz[sub], float(g.rim_radius), float(side), 40.0)
             np.testing.assert_allclose(b, b_ref, rtol=0, atol=1e-9)
-    assert tr._bridge(g, pu[:0], pz[:0], 1.0).shape == (0, 2)
+    assert rim_bridge(pu[:0], pz[:0], float(g.rim_radius), 1.0, 40.0).shape == (0, 2)
 
 
 def _ref_ellipse_volume(ell, n=721):
-    """The ellipse arc above z = 0 as the napari plugin closes it (``plugins._logic._ellipse_arc``), numpy."""
-    from osmobulge.imaging.geometry import revolution_measures
+    """The ellipse arc above z = 0 as the napari plugin closes it (``plugins._logic._ellipse_arc``), revolved."""
+    from types import SimpleNamespace
 
-    t = np.linspace(0.0, 2 * np.pi, n, endpoint=False)
-    e = ell.points(t)
-    z = e[:, 1]
-    above = z >= 0
-    if above.all() or not above.any():
+    from osmobulge.imaging.geometry import revolution_measures
+    from osmobulge.plugins._logic import _ellipse_arc
+
+    # the ellipse's own (x, z) frame as the plugin's geometry: axis at the origin, level, z = +y
+    arc = _ellipse_arc(ell, SimpleNamespace(axis_point=(0.0, 0.0), angle=0.0, up=(0.0, 1.0)), n)[:, ::-1]
+    if len(arc) < 3:
         return np.nan
-    start = int(np.argmax(~above & np.roll(above, -1))) + 1  # first point of the run above the line
-    idx = (start + np.arange(n)) % n
-    m = int(np.argmin(above[idx]))
-    run = idx[:m]
-    ends = []
-    for i_in, i_out in ((run[0], idx[-1]), (run[-1], idx[m])):
-        w = z[i_in] / (z[i_in] - z[i_out])
-        ends.append(e[i_in] + w * (e[i_out] - e[i_in]))
-    arc = np.vstack([ends[0], e[run], ends[1]])
-    arc[[0, -1], 1] = 0.0
     try:
         return revolution_measures(arc[:, 0], arc[:, 1]).volume
     except ValueError:
@@ -1052,7 +1044,7 @@ def test_track_pass_equals_refine_clean_and_motion(seed):
 @pytest.mark.parametrize("seed", range(3))
 def test_pass_tail_equals_bridges_final_fit_and_figures(seed):
     """pass_tail (one call) against the former end of _passes: bridges, _final_fit, residual RMS, edge fraction."""
-    from osmobulge.imaging._kernels import pass_tail
+    from osmobulge.imaging._kernels import pass_tail, rim_bridge
     from osmobulge.imaging.synthetic import render_series
     from osmobulge.imaging.trace import ChamberTracer
 
@@ -1071,7 +1063,7 @@ def test_pass_tail_equals_bridges_final_fit_and_figures(seed):
             if use.sum() < 6:
                 continue
             pu, pz = r["pu"][use], r["pz"][use]
-            bl, br = tr._bridge(g, pu, pz, -1.0), tr._bridge(g, pu, pz, 1.0)
+            bl, br = (rim_bridge(pu, pz, float(R), side, 40.0) for side in (-1.0, 1.0))
             U = np.concatenate(([-R], bl[:, 0], pu, br[::-1, 0], [R]))
             Z = np.concatenate(([0.0], bl[:, 1], pz, br[::-1, 1], [0.0]))
             ks = float(np.clip(4.0 + 10.0 * r["sigma"], 4.0, 15.0))
