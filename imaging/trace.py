@@ -268,6 +268,7 @@ class ChamberTracer:
         self.prev = None  # last good FrameTrace
         self._prev2 = None  # the good one before it (for the motion prediction)
         self._motion = self.settings.search  # px, last frame-to-frame motion of the dome
+        self._band = np.nan  # px, the last good dome's band width (90th percentile over its stations)
         self._tracking = False  # the last frame processed was good: start from its geometry
         self.priors = {}  # frame index -> (u, z) guide in chamber px
         # flat-line columns: away from every well's rim
@@ -516,12 +517,13 @@ class ChamberTracer:
         return np.c_[pu, pz], 1.5 * f + 2.0
 
     # ---------------------------------------------------------------------- refinement
-    def _refine(self, view, g, guide_uz, half, *, dp=True, width=None):
+    def _refine(self, view, g, guide_uz, half, *, dp=True, width=None, band=None):
         """One pass along the guide's normals: band midline offsets and station data.
 
         ``dp``: wide pass choosing a smooth path through the band by dynamic
         programming; else the peak is looked for within ``half`` of the guide
-        (or, with ``width``, within the band's half-width).
+        (or, with ``width``, within the band's half-width).  The window reaches
+        ``half`` beyond half of ``band`` (px; default the flat band's thickness).
         """
         st = self.settings
         guide = g.line.point(guide_uz[:, 0], guide_uz[:, 1])
@@ -529,7 +531,8 @@ class ChamberTracer:
         step, sstep = (2.0 * st.station_step, 2.0 * st.sample_step) if dp else (st.station_step, st.sample_step)
         # stations every `step` along the guide, their normals (to the left of travel; travel is left rim ->
         # right rim, so "left" is outward, up) and the transects there, nan-filled and smoothed along the curve
-        w = half + 0.5 * g.thickness
+        band = g.thickness if band is None else band
+        w = half + 0.5 * band
         offs = np.arange(-w, w + 1e-9, sstep)
         pts, s, nrm, prof = guide_transects(view.frame, view.k, guide, step, offs, 1.0 / step)
         if dp:
@@ -550,7 +553,7 @@ class ChamberTracer:
         else:
             centre = np.full(len(prof), len(offs) // 2)
             if width is None:
-                search = int(round((0.5 * g.thickness + half) / sstep))
+                search = int(round((0.5 * band + half) / sstep))
             else:  # the peak lies within the band's own half-width of the guide (never on a nearby speck)
                 wi = np.interp(s, width[0], width[1])
                 search = np.round((0.5 * wi + 2.0 + 1.5 * self.blur) / sstep).astype(int)
@@ -565,10 +568,15 @@ class ChamberTracer:
         """:meth:`_refine` (a narrow pass, no dynamic programming), :meth:`_clean` and the pass's motion, compiled.
 
         One call of :func:`~osmobulge.imaging._kernels.track_pass` (tested
-        equal to the three steps): the tracked frame's pass.
+        equal to the three steps): the tracked frame's pass.  Its window reaches
+        ``half`` beyond half the last good dome's band width (the 90th percentile
+        over its stations, never more than the flat band's thickness): the band
+        thins as the dome stretches (to a quarter of the flat band's width at
+        Vtilde 5), and so does the window, with the same margin about it.
         """
         st = self.settings
-        w = half + 0.5 * g.thickness
+        band = self._track_band(g)
+        w = half + 0.5 * band
         offs = np.arange(-w, w + 1e-9, st.sample_step)
         line = g.line
         d, nv = line.direction, line.normal
@@ -577,12 +585,16 @@ class ChamberTracer:
             view.frame, view.k, np.ascontiguousarray(guide_uz[:, 0], np.float64),
             np.ascontiguousarray(guide_uz[:, 1], np.float64), float(line.x0), float(line.y0), float(d[0]),
             float(d[1]), float(nv[0]), float(nv[1]), float(st.station_step), offs, float(g.polarity),
-            int(round((0.5 * g.thickness + half) / st.sample_step)), max(2, int(1.5 / st.sample_step)),
+            int(round((0.5 * band + half) / st.sample_step)), max(2, int(1.5 / st.sample_step)),
             float(g.rim_radius), float(zc), float(near), float(st.min_contrast), float(ref_con), 15)
         sigma = st.smoothing if not np.isfinite(sigma) else sigma
         return {"mid": mid, "lo": lo, "hi": hi, "contrast": con, "width": width, "stations": s, "noise": float(noise),
                 "station_pts": pts, "normals": nrm, "half": w, "pu": pu, "pz": pz, "good": good, "excluded": excl,
                 "use": use, "sigma": float(np.clip(sigma, 0.01, 3.0)), "motion": float(motion)}
+
+    def _track_band(self, g):
+        """Band width (px) the tracking window is sized from: the last good dome's, at most the flat band's."""
+        return min(g.thickness, self._band) if np.isfinite(self._band) else g.thickness
 
     def _exclusion(self, g, u, z):
         """Points merged with the flat band (at or beyond the rims, or close to a rim point) are not trusted.
@@ -1048,6 +1060,7 @@ class ChamberTracer:
             # the first pass's offsets from the predicted dome are the prediction error (after a global
             # trace unknown: the next frame tries tracking, its window's edges guard it)
             self._motion = tr["motion"] if tr["mode"] != "global" else 0.0
+            self._band = float(abs_percentile(tr["width"], tr["use"] & np.isfinite(tr["width"]), 90.0))
             self._tracking = True
         return out
 

@@ -325,3 +325,38 @@ def test_wall_grid_cache_holds_one_entry_for_an_unknown_depth():
         tr._wall_rows_at(float("nan"))
     tr._wall_rows_at(tr.ref.well.depth)
     assert len(tr._wall_grid) == (1 if not np.isfinite(tr.ref.well.depth) else 2)
+
+
+@pytest.mark.parametrize("blur", [1.0, 2.0])
+def test_tracking_window_follows_the_thinning_band(blur):
+    """The band width the tracking window is sized from follows the rendered membrane as it thins.
+
+    The truth is the half-maximum width of the rendered band: the membrane's
+    thickness l(s) (a box) blurred by the rendered Gaussian and the pixel (sigma^2
+    = blur^2 + 1/12).  Over the dome it lies between that width's median and its
+    90th percentile (the thick dome near the rims is excluded from tracing), and
+    never above the flat band's thickness.
+    """
+    from scipy.optimize import brentq
+    from scipy.special import erf
+
+    def half_max_width(t, sig):
+        def f(x):
+            return 0.5 * (erf((x + t / 2) / (sig * 2**0.5)) - erf((x - t / 2) / (sig * 2**0.5)))
+
+        return 2 * brentq(lambda x: f(x) - 0.5 * f(0.0), 0.0, t + 10 * sig)
+
+    vt = list(np.linspace(0.0, 5.0, 30) ** 1.5 / 5.0**0.5)
+    s = render_series(vt, lambda_pre=lam, nuisances=Nuisances(noise_sigma=0.01, blur_sigma=blur), seed=4, **SMALL)
+    tracer = ChamberTracer(s.frames[0])
+    sig = (blur**2 + 1 / 12) ** 0.5
+    bands = []
+    for i, frame in enumerate(s.frames):
+        r = tracer.process(frame, i)
+        assert r.flag == "ok"
+        th = s.truth.profile_thickness.isel(time=i).values / 1e-6
+        w = np.array([half_max_width(t, sig) for t in th[np.isfinite(th)]])
+        assert np.percentile(w, 50) - 0.3 <= tracer._band <= np.percentile(w, 90) + 0.5, (i, tracer._band)
+        bands.append(tracer._band)
+    assert max(bands) <= tracer.ref.thickness + 0.3
+    assert bands[-1] < 0.6 * tracer.ref.thickness  # the late window is much narrower than the flat band's
