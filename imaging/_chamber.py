@@ -118,24 +118,32 @@ class Line:
     angle: float  # rad, direction (cos, sin) in (x, y)
 
     @cached_property
+    def _dn(self):
+        """``(d0, d1, n0, n1)``: direction and normal as floats (computed once)."""
+        c, s = float(np.cos(self.angle)), float(np.sin(self.angle))
+        return c, s, s, -c
+
+    @cached_property
     def direction(self):
         """Unit vector along the line (read-only, computed once)."""
-        d = np.array([np.cos(self.angle), np.sin(self.angle)])
+        d = np.array(self._dn[:2])
         d.flags.writeable = False
         return d
 
     @cached_property
     def normal(self):
         """Unit normal pointing up (bulge side, towards row 0 for angle 0; read-only)."""
-        n = np.array([np.sin(self.angle), -np.cos(self.angle)])
+        n = np.array(self._dn[2:])
         n.flags.writeable = False
         return n
 
     def point(self, u, z=0.0):
         """View points at line coordinate ``u`` and height ``z`` (arrays broadcast), shape (..., 2)."""
+        d0, d1, n0, n1 = self._dn
+        if isinstance(u, (float, int)) and isinstance(z, (float, int)):  # one point (the same arithmetic)
+            return np.array([self.x0 + u * d0 + z * n0, self.y0 + u * d1 + z * n1])
         u = np.asarray(u, float)
         z = np.asarray(z, float)
-        (d0, d1), (n0, n1) = self.direction, self.normal
         x = self.x0 + u * d0 + z * n0
         out = np.empty((*x.shape, 2))
         out[..., 0] = x
@@ -149,8 +157,9 @@ class Line:
 
     def shifted(self, du=0.0, dz=0.0):
         """Same line with its origin moved by ``du`` along and ``dz`` across it."""
-        x, y = self.point(du, dz)
-        return Line(float(x), float(y), self.angle)
+        d0, d1, n0, n1 = self._dn
+        du, dz = float(du), float(dz)
+        return Line(float(self.x0 + du * d0 + dz * n0), float(self.y0 + du * d1 + dz * n1), self.angle)
 
 
 @dataclass(frozen=True)
@@ -402,9 +411,8 @@ def measure_line(view, line, u, *, polarity, thickness, window):
     # (the numpy form is `_measure_line_numpy`)
     u = np.ascontiguousarray(np.atleast_1d(np.asarray(u, float)))
     offs = np.arange(-window, window + 1e-9, 0.5)
-    d, nv = line.direction, line.normal
     a, b, rms, inl, wmed, cmed = line_band(native_frame(view.frame), view.k, float(line.x0), float(line.y0),
-                                           float(d[0]), float(d[1]), float(nv[0]), float(nv[1]), u, offs,
+                                           *line._dn, u, offs,
                                            float(polarity), int((0.5 * thickness + 4) / 0.5), 4)
     if not np.isfinite(a):
         return line, thickness, np.nan, np.nan, inl

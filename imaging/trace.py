@@ -396,9 +396,8 @@ class ChamberTracer:
         """
         g0 = self.ref
         zs_c, offs_c, zs, offs = self._wall_rows_at(well.depth)
-        d, nv = line.direction, line.normal
         status, cl, cr, al, bl, ar, br, rms = locate_walls(
-            view.frame, view.k, float(line.x0), float(line.y0), float(d[0]), float(d[1]), float(nv[0]), float(nv[1]),
+            view.frame, view.k, float(line.x0), float(line.y0), *line._dn,
             float(well.u_left), float(well.u_right), float(well.slope_left), float(well.slope_right),
             float(self._wall_sign), zs_c, offs_c, zs, -0.5 * g0.thickness, offs)
         if status == 1:
@@ -454,7 +453,8 @@ class ChamberTracer:
                                                   thickness=g0.thickness, window=win)
         if not coarse:
             # the fine window holds the band only when it moved less than a few px: else its contrast drops
-            dz = abs(float(np.dot(line.point(0.0) - predicted.point(0.0), line.normal)))
+            d0, d1, n0, n1 = line._dn
+            dz = abs((line.x0 - predicted.x0) * n0 + (line.y0 - predicted.y0) * n1)
             if not (dz < 6.0 and abs(con) > 0.5 * abs(g0.contrast)):
                 return None, drift
         well, wall_rms = self._walls(view, line, well)
@@ -579,18 +579,17 @@ class ChamberTracer:
         w = half + 0.5 * band
         offs = np.arange(-w, w + 1e-9, st.sample_step)
         line = g.line
-        d, nv = line.direction, line.normal
         zc, near = self._exclusion_zone(g)
         (pts, s, nrm, mid, lo, hi, con, width, noise, pu, pz, good, excl, use, sigma, motion) = track_pass(
             view.frame, view.k, np.ascontiguousarray(guide_uz[:, 0], np.float64),
-            np.ascontiguousarray(guide_uz[:, 1], np.float64), float(line.x0), float(line.y0), float(d[0]),
-            float(d[1]), float(nv[0]), float(nv[1]), float(st.station_step), offs, float(g.polarity),
+            np.ascontiguousarray(guide_uz[:, 1], np.float64), float(line.x0), float(line.y0), *line._dn,
+            float(st.station_step), offs, float(g.polarity),
             int(round((0.5 * band + half) / st.sample_step)), max(2, int(1.5 / st.sample_step)),
             float(g.rim_radius), float(zc), float(near), float(st.min_contrast), float(ref_con), 15)
         sigma = st.smoothing if not np.isfinite(sigma) else sigma
         return {"mid": mid, "lo": lo, "hi": hi, "contrast": con, "width": width, "stations": s, "noise": float(noise),
                 "station_pts": pts, "normals": nrm, "half": w, "pu": pu, "pz": pz, "good": good, "excluded": excl,
-                "use": use, "sigma": float(np.clip(sigma, 0.01, 3.0)), "motion": float(motion)}
+                "use": use, "sigma": min(max(float(sigma), 0.01), 3.0), "motion": float(motion)}
 
     def _track_band(self, g):
         """Band width (px) the tracking window is sized from: the last good dome's, at most the flat band's."""
@@ -707,7 +706,7 @@ class ChamberTracer:
             float(nv[1]), float(g.rim_radius), *self._exclusion_zone(g),
             float(max(st.min_contrast * ref_con, 4.0 * r.get("noise", 0.0))), 15)
         sigma = st.smoothing if not np.isfinite(sigma) else sigma
-        r.update(pu=pu, pz=pz, good=good, excluded=excl, use=use, sigma=float(np.clip(sigma, 0.01, 3.0)))
+        r.update(pu=pu, pz=pz, good=good, excluded=excl, use=use, sigma=min(max(float(sigma), 0.01), 3.0))
         return r
 
     @staticmethod
@@ -812,7 +811,7 @@ class ChamberTracer:
             # the band came close to the window's end (the prediction was off): its edges and width are
             # not to be trusted -- the wide search takes over
             return None
-        ks = float(np.clip(4.0 + 10.0 * r["sigma"], 4.0, 15.0))
+        ks = min(max(4.0 + 10.0 * r["sigma"], 4.0), 15.0)
         # a fine tracking pass that found the band where predicted is final; else narrow passes around
         # the last curve, repeated until it stops moving
         n_more = 0 if (track and motion < 1.0) else 3
@@ -836,7 +835,7 @@ class ChamberTracer:
             uz = self._offset_guide(g, r) if track else self._guide_from(g, r, ks)
         r["converged"] = moved < 1.0
         r["motion"] = motion
-        ks = float(np.clip(4.0 + 10.0 * r["sigma"], 4.0, 15.0))
+        ks = min(max(4.0 + 10.0 * r["sigma"], 4.0), 15.0)
         # bridges to the rims, the final robust spline and the pass figures: one compiled call
         # (the scipy solver takes over when a band system is singular, as in _final_fit)
         status, U, Z, keep, _, _, res, _, _, puz, rms, edge_fraction = pass_tail(
@@ -851,8 +850,8 @@ class ChamberTracer:
         if status != 0:
             rms = float(np.sqrt(np.mean(res[inner] ** 2))) if inner.any() else np.nan
         r.update(
-            u=puz[:, 0],
-            z=puz[:, 1],
+            u=np.ascontiguousarray(puz[:, 0]),  # contiguous once here (the next kernels take them as they are)
+            z=np.ascontiguousarray(puz[:, 1]),
             points_u=U[inner],
             points_z=Z[inner],
             residual_rms=float(rms),
@@ -877,10 +876,9 @@ class ChamberTracer:
         # rim contact: membrane on the flat line just outside each rim, as a fraction of the
         # band's contrast against the water on the nearest flat columns (1 = on the surface, 0 = lifted)
         # (compiled: the band at the rim, the band far out and the water above it, both sides in one call)
-        d, nv = g.line.direction, g.line.normal
         fig["rim_contact"] = float(rim_contact(
-            view.frame, view.k, float(g.line.x0), float(g.line.y0), float(d[0]), float(d[1]), float(nv[0]),
-            float(nv[1]), float(R), 0.5 * g.thickness + 3.0 * self.blur + 4.0, _RIM_FRACTIONS,
+            view.frame, view.k, float(g.line.x0), float(g.line.y0), *g.line._dn, float(R),
+            0.5 * g.thickness + 3.0 * self.blur + 4.0, _RIM_FRACTIONS,
             *self._rim_contact_u))
         # sustained gap to another membrane beyond the band, both sides of the dome
         fig["neighbour_gap"] = self._neighbour_gap(view, g, tr) if self._neighbour_possible(view, g, tr) else np.inf
@@ -889,10 +887,9 @@ class ChamberTracer:
 
     def _neighbour_possible(self, view, g, tr):
         """Could another bulge reach the dome?  A well within reach, or the dome near the field's edge."""
-        d, nv = g.line.direction, g.line.normal
         umax, xmin, xmax, ymin = curve_extent(np.ascontiguousarray(tr["u"], np.float64),
                                               np.ascontiguousarray(tr["z"], np.float64), float(g.line.x0),
-                                              float(g.line.y0), float(d[0]), float(d[1]), float(nv[0]), float(nv[1]))
+                                              float(g.line.y0), *g.line._dn)
         reach = umax + 2.5 * g.rim_radius
         if any(min(abs(wl.u_left), abs(wl.u_right)) < reach for wl in g.others):
             return True

@@ -1143,3 +1143,24 @@ def test_lsq_spline_with_as_few_distinct_points_as_coefficients():
         w = np.zeros(20)
         w[np.r_[0:2, 20 - (n_w - 2):20]] = 1.0
         np.testing.assert_allclose(lsq_spline(x, x**2, t, w)(x), x**2, rtol=0, atol=1e-9)
+
+
+def test_line_points_scalar_and_array_agree():
+    """Line.point's one-point path, its array path, coords and shifted are one geometry (bit for bit)."""
+    from osmobulge.imaging._chamber import Line
+
+    rng = np.random.default_rng(7)
+    for _ in range(200):
+        line = Line(*rng.uniform(-500, 1500, 2), rng.uniform(-np.pi, np.pi))
+        u, z = rng.normal(0, 300, 2)
+        one = line.point(float(u), float(z))
+        arr = line.point(np.array([u]), np.array([z]))[0]
+        np.testing.assert_array_equal(one, arr)
+        np.testing.assert_array_equal(line.direction, [np.cos(line.angle), np.sin(line.angle)])
+        np.testing.assert_array_equal(line.normal, [np.sin(line.angle), -np.cos(line.angle)])
+        sh = line.shifted(u, z)
+        np.testing.assert_array_equal([sh.x0, sh.y0], one)
+        # back to line coordinates, and a point of the shifted line is the same view point
+        cu, cz = line.coords(one[None, :])
+        assert cu[0] == pytest.approx(u, abs=1e-9) and cz[0] == pytest.approx(z, abs=1e-9)
+        np.testing.assert_allclose(sh.point(1.5, -2.0), line.point(u + 1.5, z - 2.0), rtol=0, atol=1e-9)
