@@ -702,7 +702,10 @@ def longest_run(mask, weights):
 def running_percentile(x, q, size):
     """``scipy.ndimage.percentile_filter(x, q, size, mode="nearest")`` of a 1-D array without nan (odd ``size``).
 
-    A sorted window slid along ``x`` (the edge values repeated beyond the ends).
+    The window (the edge values repeated beyond the ends) slides along ``x``
+    as counts per rank of ``x``'s sorted order in a Fenwick tree: each step
+    removes one sample, adds one and finds the window's ``rank``-th smallest
+    by descending the tree (``n log n``, not ``n size``).
     """
     if size < 1 or size % 2 == 0:
         raise ValueError("running_percentile needs an odd window size")
@@ -712,28 +715,42 @@ def running_percentile(x, q, size):
         return out
     half = size // 2
     rank = size - 1 if q == 100.0 else int(float(size) * q / 100.0)
-    buf = np.empty(size)
-    for j in range(size):
-        buf[j] = x[min(max(j - half, 0), n - 1)]
-    buf.sort()
+    order = np.argsort(x, kind="mergesort")
+    pos = np.empty(n, np.int64)  # 1-based rank of each sample
+    for r in range(n):
+        pos[order[r]] = r + 1
+    tree = np.zeros(n + 1, np.int64)
+    top = 1
+    while top * 2 <= n:
+        top *= 2
+    for j in range(-half, half + 1):
+        i = pos[min(max(j, 0), n - 1)]
+        while i <= n:
+            tree[i] += 1
+            i += i & -i
     for i in range(n):
-        out[i] = buf[rank]
+        p = 0  # the last rank whose prefix count is <= rank: the answer is the next one
+        rem = rank
+        b = top
+        while b:
+            if p + b <= n and tree[p + b] <= rem:
+                p += b
+                rem -= tree[p]
+            b //= 2
+        out[i] = x[order[p]]
         if i == n - 1:
             break
-        old = x[min(max(i - half, 0), n - 1)]
-        new = x[min(i + half + 1, n - 1)]
-        if old == new:
-            continue
-        k = np.searchsorted(buf, old)  # remove one copy of old, insert new, keeping buf sorted
-        if new > old:
-            while k + 1 < size and buf[k + 1] < new:
-                buf[k] = buf[k + 1]
-                k += 1
-        else:
-            while k > 0 and buf[k - 1] > new:
-                buf[k] = buf[k - 1]
-                k -= 1
-        buf[k] = new
+        old = pos[min(max(i - half, 0), n - 1)]
+        new = pos[min(i + half + 1, n - 1)]
+        if old != new:
+            j = old
+            while j <= n:
+                tree[j] -= 1
+                j += j & -j
+            j = new
+            while j <= n:
+                tree[j] += 1
+                j += j & -j
     return out
 
 

@@ -373,6 +373,19 @@ def test_running_percentile_equals_scipy(size):
             np.testing.assert_array_equal(running_percentile(x, q, size), want)
 
 
+def test_running_percentile_random_windows_and_ties():
+    """Windows longer than the data, many ties, every percentile: as scipy, sample for sample."""
+    from osmobulge.imaging._kernels import running_percentile
+
+    rng = np.random.default_rng(3)
+    for t in range(400):
+        n, size = int(rng.integers(1, 300)), 2 * int(rng.integers(0, 120)) + 1
+        x = np.round(rng.normal(size=n), 1) if t % 2 else rng.normal(size=n)
+        q = float(rng.choice([0.0, 10.0, 33.3, 50.0, 80.0, 99.9, 100.0]))
+        np.testing.assert_array_equal(running_percentile(x, q, size), ndi.percentile_filter(x, q, size,
+                                                                                            mode="nearest"))
+
+
 def test_running_percentile_refuses_an_even_window():
     from osmobulge.imaging._kernels import running_percentile
 
