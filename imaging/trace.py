@@ -446,7 +446,7 @@ class ChamberTracer:
             # skip columns where the last dome (its overhang) comes down into the search window
             clear = clear_of_curve(us, np.ascontiguousarray(self.prev.u, np.float64),
                                    np.ascontiguousarray(self.prev.z, np.float64), 0.5 * g0.thickness + win + 6.0, 6.0)
-            if clear.sum() >= 12:
+            if np.count_nonzero(clear) >= 12:
                 us = us[clear]
         predicted = line
         line, thick, con, rms, inl = measure_line(view, line, us, polarity=g0.polarity,
@@ -677,15 +677,24 @@ class ChamberTracer:
         slowly; a lost track drops at once).
         """
         dome = ~tr["excluded"]
-        if not dome.any():
+        n_dome = np.count_nonzero(dome)
+        if not n_dome:
             return False
-        con = _nanmedian(tr["contrast"][dome])
+        con = self._dome_median(tr)
         strong = con > 0.5 * tr["ref_contrast"]
         if tr.get("mode") == "track" and self.prev is not None:
             strong = strong or con > 0.8 * self.prev.figures.get("dome_contrast", np.inf) * tr["ref_contrast"]
-        return bool(np.mean(tr["good"][dome]) > 0.9 and strong
+        # the fraction of good dome stations (as np.mean of the booleans: an exact count over an exact count)
+        return bool(np.count_nonzero(tr["good"] & dome) / n_dome > 0.9 and strong
                     and tr["residual_rms"] < self.settings.residual_flag and tr["converged"]
                     and tr["edge_fraction"] < 0.05)
+
+    @staticmethod
+    def _dome_median(tr):
+        """Median band contrast of a pass's dome stations (not excluded; once per pass, kept in ``tr``)."""
+        if "dome_median" not in tr:
+            tr["dome_median"] = _nanmedian(tr["contrast"][~tr["excluded"]])
+        return tr["dome_median"]
 
     def _clean(self, g, r, ref_con):
         """Accepted stations of a pass: finite, enough contrast, outside the rim zones, not outliers.
@@ -804,7 +813,7 @@ class ChamberTracer:
                 ref_con = float(np.nanpercentile(r["contrast"], 90))
             r = self._clean(g, r, ref_con)
         use = r["use"]
-        if use.sum() < 6:
+        if np.count_nonzero(use) < 6:
             return None
         motion = moved = r["motion"] if "motion" in r else float(abs_percentile(r["mid"], use, 90.0))
         if track and motion > half - 2.0 - 2.0 * self.blur:
@@ -846,7 +855,7 @@ class ChamberTracer:
             spl, keep, puz = self._final_fit(U, Z, ks)
             res = spl.residuals
         inner = keep.copy()
-        inner[[0, -1]] = False
+        inner[0] = inner[-1] = False
         if status != 0:
             rms = float(np.sqrt(np.mean(res[inner] ** 2))) if inner.any() else np.nan
         r.update(
@@ -868,7 +877,7 @@ class ChamberTracer:
         ds = np.concatenate(([0.0], np.diff(tr["stations"])))
         dome = ~excl
         ref = tr["ref_contrast"]
-        fig["dome_contrast"] = float(_nanmedian(con[dome]) / ref) if dome.any() and ref > 0 else 0.0
+        fig["dome_contrast"] = float(self._dome_median(tr) / ref) if dome.any() and ref > 0 else 0.0
         # gaps: stations whose band contrast drops well below the dome's own (a running 80th percentile
         # along the curve: the thin pole is fainter than the rims) and into the noise
         fig["gap_length"] = float(low_contrast_run(np.ascontiguousarray(con, np.float64), dome, ds,
