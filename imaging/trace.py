@@ -62,6 +62,7 @@ from osmobulge.imaging._chamber import (
 )
 from osmobulge.imaging._kernels import (
     abs_percentile,
+    block_mean,
     clean_stations,
     clear_of_curve,
     curve_extent,
@@ -257,6 +258,7 @@ class ChamberTracer:
         c1, r1 = np.ceil(corners.max(axis=0)).astype(int) + 1
         self._patch_box = (r0, r1, c0, c1)
         ref_patch, _ = view.patch(r0, r1, c0, c1)
+        self._ref_raw = ref_patch  # the first frame itself is registered without a correlation
         self._ref_patch = self._highpass(ref_patch)
         # sign of (liquid - base) grey levels: the left wall steps by this sign going right
         zmid = top - 0.4 * depth
@@ -334,6 +336,8 @@ class ChamberTracer:
         cur, _ = view.patch(r0 + dy, r1 + dy, c0 + dx, c1 + dx)
         if (cur.shape[0] // 2, cur.shape[1] // 2) != self._ref_patch.shape:
             return self._drift.copy()
+        if cur.shape == self._ref_raw.shape and np.array_equal(cur, self._ref_raw):
+            return np.array([dx, dy], float)  # the reference patch itself (the first frame): no shift
         cur = self._highpass(cur)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", UserWarning)  # an empty (black) frame: no RMS error estimate
@@ -483,7 +487,7 @@ class ChamberTracer:
         hh, ww = patch.shape[0] // f * f, patch.shape[1] // f * f
         if hh < 4 * f or ww < 4 * f:
             return None
-        coarse = patch[:hh, :ww].reshape(hh // f, f, ww // f, f).mean(axis=(1, 3))
+        coarse = block_mean(patch, f)  # f x f block means (compiled)
         bg = ndi.gaussian_filter(coarse, 8.0, mode="nearest")
         con = g.polarity * (bg - coarse) / np.maximum(np.abs(bg), 1e-9)
         if np.isfinite(g.contrast):

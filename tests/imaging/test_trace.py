@@ -360,3 +360,20 @@ def test_tracking_window_follows_the_thinning_band(blur):
         bands.append(tracer._band)
     assert max(bands) <= tracer.ref.thickness + 0.3
     assert bands[-1] < 0.6 * tracer.ref.thickness  # the late window is much narrower than the flat band's
+
+
+def test_registration_of_the_first_frame_and_of_shifted_copies():
+    """The first frame registers at zero drift without a correlation, and as the correlation says it does."""
+    s = render_series([0.0], lambda_pre=lam, nuisances=Nuisances(noise_sigma=0.02), seed=3, **SMALL)
+    tracer = ChamberTracer(s.frames[0])
+    view = FrameView(s.frames[0], tracer.k)
+    np.testing.assert_array_equal(tracer._register(view), [0.0, 0.0])
+    raw = tracer._ref_raw
+    tracer._ref_raw = raw[:-1]  # no shortcut: the phase correlation of the patch with itself
+    np.testing.assert_array_equal(tracer._register(view), [0.0, 0.0])
+    tracer._ref_raw = raw
+    for dr, dc in ((4, -6), (-3, 2)):
+        moved = np.roll(s.frames[0], (dr, dc), axis=(0, 1))
+        vx, vy = FrameView(moved, tracer.k).from_frame(dr, dc)
+        ox, oy = FrameView(moved, tracer.k).from_frame(0, 0)
+        np.testing.assert_allclose(tracer._register(FrameView(moved, tracer.k)), [vx - ox, vy - oy], atol=2.0)
