@@ -357,7 +357,8 @@ class _TiffBackend:
 
                 mm = tifffile.memmap(self.path, mode="r")
                 if mm.shape[-2:] == self.frame_shape or (mm.ndim >= 3 and mm.shape[-3:-1] == self.frame_shape):
-                    self._memmap = mm.reshape((n_pages, *first.shape))
+                    # a plain ndarray view of the map: indexing a frame skips np.memmap's subclass bookkeeping
+                    self._memmap = np.asarray(mm).reshape((n_pages, *first.shape))
             except (ValueError, OSError):  # compressed or not contiguous: page by page
                 self._memmap = None
         self.pixel_size, self.times, self.time_resolution = self._metadata()
@@ -393,7 +394,7 @@ class _TiffBackend:
         n_ok = max(0, min(n_img, (size - off) // fbytes))
         for k in range(n_ok, n_img):
             self.bad.append((f"{self.path.name}[{k}]", "image data run past the end of the file (truncated)"))
-        self._contiguous = np.memmap(self.path, dtype=dtype, mode="r", offset=off, shape=(n_ok, *shape))
+        self._contiguous = np.asarray(np.memmap(self.path, dtype=dtype, mode="r", offset=off, shape=(n_ok, *shape)))
         self._memmap = None
         self.page_index = np.arange(n_img)
         self.good = np.arange(n_ok)

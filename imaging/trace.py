@@ -52,6 +52,8 @@ from osmobulge.imaging._chamber import (
     WALL_WINDOW,
     ChamberGeometry,
     FrameView,
+    Line,
+    Well,
     _nanmedian,
     band_edges,
     detect_orientation,
@@ -211,6 +213,18 @@ class FrameTrace:
 
 # ---------------------------------------------------------------------------------- helpers
 # ---------------------------------------------------------------------------------- tracer
+def _percentile90(x):
+    """``np.percentile(abs(x[finite]), 90)`` (nan for none), as :func:`~osmobulge.imaging._kernels.abs_percentile`."""
+    v = np.abs(x[np.isfinite(x)])
+    if not v.size:
+        return np.nan
+    v.sort()
+    pos = 0.9 * (v.size - 1)
+    lo = int(pos)
+    hi = min(lo + 1, v.size - 1)
+    return float(v[lo] + (pos - lo) * (v[hi] - v[lo]))
+
+
 class ChamberTracer:
     """Follows one chamber through a series, one frame at a time (constant memory).
 
@@ -406,11 +420,10 @@ class ChamberTracer:
             float(self._wall_sign), zs_c, offs_c, zs, -0.5 * g0.thickness, offs)
         if status == 1:
             return None, np.nan
-        well = replace(well, u_left=float(cl), u_right=float(cr))
         if status == 2:
+            well = replace(well, u_left=float(cl), u_right=float(cr))
             return measure_walls(view, line, well, thickness=g0.thickness, window=WALL_WINDOW)
-        return replace(well, u_left=float(al), slope_left=float(bl), u_right=float(ar),
-                       slope_right=float(br)), float(rms)
+        return Well(float(al), float(ar), float(bl), float(br), well.depth), float(rms)
 
     def measure_geometry(self, view):
         """Drift, flat line, walls and rim of the chamber in one frame (a :class:`ChamberGeometry`).
@@ -437,11 +450,11 @@ class ChamberTracer:
     def _geometry_at(self, view, drift, *, coarse=True):
         """Geometry near the predicted position; ``coarse=False``: no wide line search (None when it was needed)."""
         g0 = self.ref
-        line = replace(g0.line, x0=g0.line.x0 + drift[0], y0=g0.line.y0 + drift[1])
-        well = g0.well
+        angle, well = g0.line.angle, g0.well
         if self.prev is not None and self.prev.geometry is not None:
-            line = replace(line, angle=self.prev.geometry.line.angle)
+            angle = self.prev.geometry.line.angle
             well = replace(self.prev.geometry.well, depth=g0.well.depth)
+        line = Line(g0.line.x0 + drift[0], g0.line.y0 + drift[1], angle)
         if coarse:
             line = self._coarse_line(view, line)
         win = 0.5 * g0.thickness + 8.0
@@ -671,7 +684,8 @@ class ChamberTracer:
         if (q is None or q.index != p.index - 1 or p.index != index - 1 or len(q.u) < 4 or p.source != "auto"
                 or q.source != "auto"):
             return np.column_stack((p.u, p.z))
-        return extrapolated_curve(*(np.ascontiguousarray(v, np.float64) for v in (p.u, p.z, q.u, q.z)))
+        c = np.ascontiguousarray
+        return extrapolated_curve(c(p.u, np.float64), c(p.z, np.float64), c(q.u, np.float64), c(q.z, np.float64))
 
     def _trustworthy(self, tr):
         """A tracked (not global) result good enough to keep: strong band along the whole dome.
@@ -1070,7 +1084,7 @@ class ChamberTracer:
             # the first pass's offsets from the predicted dome are the prediction error (after a global
             # trace unknown: the next frame tries tracking, its window's edges guard it)
             self._motion = tr["motion"] if tr["mode"] != "global" else 0.0
-            self._band = float(abs_percentile(tr["width"], tr["use"] & np.isfinite(tr["width"]), 90.0))
+            self._band = _percentile90(tr["width"][tr["use"]])
             self._tracking = True
         return out
 
