@@ -23,7 +23,7 @@ Run with ``python benchmarks/imaging.py [--quick] [--frames 500]``.
    of 3), single core; once more with the file evicted from the page cache
    before each pass (``posix_fadvise``), and for folders of TIFF and PNG
    files.  The first call in a process, which loads the numba kernels from
-   their disk cache (compiling them takes about 30 s once on a new machine),
+   their disk cache (compiling them takes about 40 s once on a new machine),
    is timed apart, and so is how each frame was traced (``track``:
    from the prediction of the last two frames; ``guide``: wide search;
    ``global``: from scratch).  Target: extraction no slower than 5x reading
