@@ -140,8 +140,8 @@ class Line:
     def point(self, u, z=0.0):
         """View points at line coordinate ``u`` and height ``z`` (arrays broadcast), shape (..., 2)."""
         d0, d1, n0, n1 = self._dn
-        if isinstance(u, (float, int)) and isinstance(z, (float, int)):  # one point (the same arithmetic)
-            return np.array([self.x0 + u * d0 + z * n0, self.y0 + u * d1 + z * n1])
+        if isinstance(u, (float, int)) and isinstance(z, (float, int)):  # one point (the same arithmetic, float64)
+            return np.array([float(self.x0) + u * d0 + z * n0, float(self.y0) + u * d1 + z * n1])
         u = np.asarray(u, float)
         z = np.asarray(z, float)
         x = self.x0 + u * d0 + z * n0
@@ -159,7 +159,7 @@ class Line:
         """Same line with its origin moved by ``du`` along and ``dz`` across it."""
         d0, d1, n0, n1 = self._dn
         du, dz = float(du), float(dz)
-        return Line(float(self.x0 + du * d0 + dz * n0), float(self.y0 + du * d1 + dz * n1), self.angle)
+        return Line(float(self.x0) + du * d0 + dz * n0, float(self.y0) + du * d1 + dz * n1, self.angle)
 
 
 @dataclass(frozen=True)

@@ -272,7 +272,8 @@ class ChamberTracer:
         c1, r1 = np.ceil(corners.max(axis=0)).astype(int) + 1
         self._patch_box = (r0, r1, c0, c1)
         ref_patch, _ = view.patch(r0, r1, c0, c1)
-        self._ref_raw = ref_patch  # the first frame itself is registered without a correlation
+        self._ref_raw = ref_patch.copy()  # the first frame itself is registered without a correlation (a copy:
+        # view.patch is a view of a float32 frame, which a caller may reuse for the next frame)
         self._ref_patch = self._highpass(ref_patch)
         # sign of (liquid - base) grey levels: the left wall steps by this sign going right
         zmid = top - 0.4 * depth
@@ -1133,6 +1134,7 @@ class ChamberTracer:
         out.flag, out.flag_figure, out.flag_value = "ok", "", np.nan
         out.ok = True
         self._prev2, self.prev = None, out  # a person's profile guides the trace of the next frames
+        self._band = np.nan  # its band width is unknown: the next tracking window is the flat band's again
         self._tracking = True
         return out
 

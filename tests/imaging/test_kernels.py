@@ -1177,3 +1177,7 @@ def test_line_points_scalar_and_array_agree():
         cu, cz = line.coords(one[None, :])
         assert cu[0] == pytest.approx(u, abs=1e-9) and cz[0] == pytest.approx(z, abs=1e-9)
         np.testing.assert_allclose(sh.point(1.5, -2.0), line.point(u + 1.5, z - 2.0), rtol=0, atol=1e-9)
+    # float32 fields (a caller's): both paths compute in float64
+    line = Line(np.float32(100.1), np.float32(50.3), 0.3)
+    np.testing.assert_array_equal(line.point(1.0, 2.0), line.point(np.array([1.0]), np.array([2.0]))[0])
+    assert line.point(1.0, 2.0).dtype == np.float64 and isinstance(line.shifted(1.0, 2.0).x0, float)

@@ -129,6 +129,7 @@ def test_manual_points_replace_trace():
     rows = np.r_[t.midline_row.values[0][::-1], t.midline_row.values[1][1:]]
     r = tracer.process(s.frames[1], 1, manual=np.c_[cols, rows])
     assert r.source == "manual"
+    assert np.isnan(tracer._band)  # the next tracking window: the flat band's (a picked band has no width)
     assert r.volume == pytest.approx(float(t.volume) / 1e-18, rel=2e-3, abs=0)
 
 
@@ -349,17 +350,33 @@ def test_tracking_window_follows_the_thinning_band(blur):
     vt = list(np.linspace(0.0, 5.0, 30) ** 1.5 / 5.0**0.5)
     s = render_series(vt, lambda_pre=lam, nuisances=Nuisances(noise_sigma=0.01, blur_sigma=blur), seed=4, **SMALL)
     tracer = ChamberTracer(s.frames[0])
+    windows = []  # (half-width of the tracking window, the search margin asked for, the band before the frame)
+    track_pass = tracer._track_pass
+
+    def spy(view, g, guide_uz, half, ref_con):
+        res = track_pass(view, g, guide_uz, half, ref_con)
+        windows.append((res["half"], half, band_before, g.thickness))
+        return res
+
+    tracer._track_pass = spy
     sig = (blur**2 + 1 / 12) ** 0.5
-    bands = []
+    bands, modes = [], []
     for i, frame in enumerate(s.frames):
+        band_before = tracer._band
         r = tracer.process(frame, i)
         assert r.flag == "ok"
+        modes.append(r.mode)
         th = s.truth.profile_thickness.isel(time=i).values / 1e-6
         w = np.array([half_max_width(t, sig) for t in th[np.isfinite(th)]])
         assert np.percentile(w, 50) - 0.3 <= tracer._band <= np.percentile(w, 90) + 0.5, (i, tracer._band)
         bands.append(tracer._band)
+    assert modes.count("track") >= 20, modes
     assert max(bands) <= tracer.ref.thickness + 0.3
     assert bands[-1] < 0.6 * tracer.ref.thickness  # the late window is much narrower than the flat band's
+    # the tracking window reached `half` beyond half the last good frame's band
+    for w, half, band, thick in windows:
+        assert w == pytest.approx(half + 0.5 * (min(band, thick) if np.isfinite(band) else thick), abs=1e-12)
+    assert windows[-1][0] < windows[-1][1] + 0.3 * windows[-1][3]  # narrower than with the flat band's thickness
 
 
 def test_registration_of_the_first_frame_and_of_shifted_copies():
@@ -377,3 +394,10 @@ def test_registration_of_the_first_frame_and_of_shifted_copies():
         vx, vy = FrameView(moved, tracer.k).from_frame(dr, dc)
         ox, oy = FrameView(moved, tracer.k).from_frame(0, 0)
         np.testing.assert_allclose(tracer._register(FrameView(moved, tracer.k)), [vx - ox, vy - oy], atol=2.0)
+    # a float32 frame buffer reused for the next frame (the tracer keeps its own copy of the reference patch)
+    buf = s.frames[0].astype(np.float32)
+    tracer = ChamberTracer(buf)
+    buf[:] = np.roll(s.frames[0], (4, -6), axis=(0, 1))
+    want = ChamberTracer(s.frames[0].astype(np.float32))._register(FrameView(buf.copy(), tracer.k))
+    assert np.hypot(*want) > 5.0  # moved
+    np.testing.assert_array_equal(tracer._register(FrameView(buf, tracer.k)), want)
