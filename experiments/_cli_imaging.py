@@ -63,6 +63,9 @@ def extract(
                                                             "(index from the left of the bulge-up view).")] = None,
     all_chambers: Annotated[bool, typer.Option("--all-chambers", help="Trace every well whose two walls are in "
                                                                        "view, stacked along 'chamber'.")] = False,
+    reference_frame: Annotated[Path | None, typer.Option(help="Image or series whose first frame shows the flat "
+                                                              "membrane, when SOURCE starts bulged (a later file "
+                                                              "of a split series: give the first file).")] = None,
     errors: Annotated[str, typer.Option(help="flag: keep unmeasurable frames flagged; raise: stop.")] = "flag",
     progress: Annotated[bool, typer.Option(help="Show a progress bar.")] = True,
     as_json: Annotated[bool, typer.Option("--json", help="Print the summary as JSON.")] = False,
@@ -83,6 +86,8 @@ def extract(
         raise typer.BadParameter(f"{errors!r} is not one of {ERRORS}", param_hint="--errors")
     if not source.exists():
         raise typer.BadParameter(f"{str(source)!r} does not exist", param_hint="SOURCE")
+    if reference_frame is not None and not reference_frame.exists():
+        raise typer.BadParameter(f"{str(reference_frame)!r} does not exist", param_hint="--reference-frame")
     if all_chambers and chamber_region is not None:
         raise typer.BadParameter("give --chamber-region or --all-chambers, not both", param_hint="--all-chambers")
     ch = _chamber(chamber, chamber_radius_um, chamber_depth_um, membrane_thickness_um, concentration_molar)
@@ -96,6 +101,7 @@ def extract(
             chamber_region="all" if all_chambers else chamber_region,
             errors=errors,
             progress=progress and not as_json,
+            reference_frame=reference_frame,
         )
     except (ValueError, RuntimeError) as err:
         typer.echo(f"error: {err}", err=True)

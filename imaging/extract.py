@@ -153,6 +153,7 @@ def extract(
     settings=None,
     n_profile=201,
     fit_prestretch=True,
+    reference_frame=None,
 ) -> xr.Dataset:
     r"""Extract bulge profiles, volumes, areas and rim radii from a micrograph series.
 
@@ -161,7 +162,7 @@ def extract(
     source : str, Path or ndarray of shape (T, H, W)
         A series file or folder (read lazily by :mod:`osmobulge.imaging.io`) or
         the frames themselves (8- or 16-bit or float).  The first frame must show
-        the flat membrane.
+        the flat membrane (else see ``reference_frame``).
     pixel_size : float, m, optional
         Square pixel size; required when the source carries none; must agree
         with the file's value when both are given.
@@ -205,6 +206,16 @@ def extract(
         Arc-length samples of the stored profile.
     fit_prestretch : bool
         Fit :math:`\lambda_{pre}(\tilde V)` (supplement Sec. 5.7) to the good frames.
+    reference_frame : ndarray of shape (H, W), str or Path, optional
+        The frame the chamber (flat line, rim, well) is found in, when the
+        source's own first frame does not show the flat membrane: e.g. a later
+        file of a series split into files, with the first file's first frame
+        (an array, or an image or series file / folder whose first frame is
+        used).  Same field of view (frame shape) and pixel size; the stage may
+        have moved between the files by up to ``settings.max_drift`` px (the
+        first frame is registered against it).  The rim radius and well depth
+        of the reference (without ``chamber``) and the flat membrane's rim for
+        :math:`\lambda_{pre}` come from it.
 
     Returns
     -------
@@ -259,12 +270,16 @@ def extract(
 
     # -- the tracers: one per chamber ------------------------------------------------------------
     first = src[0]
+    ref_frame, ref_name = _reference(reference_frame, first, p)
     try:
-        tracers = _tracers(first, bulge_direction, chamber_region, settings)
+        tracers = _tracers(first if ref_frame is None else ref_frame, bulge_direction, chamber_region, settings)
     except ChamberNotFound as err:  # (not a bad chamber_region: that error says so itself)
+        if ref_frame is not None:
+            raise ChamberNotFound(f"{err} -- in the reference frame ({ref_name}), which must show the flat "
+                                  f"membrane") from err
         raise ChamberNotFound(f"{err} -- the chamber is found in the first frame, which must show the flat membrane "
                          f"(a series that starts with the dome already grown, e.g. the second file of a split "
-                         f"series, cannot be measured on its own)") from err
+                         f"series, needs reference_frame= a frame of the flat membrane)") from err
     view = FrameView(first, tracers[0].k)
     if len(tracers) == 1:
         parts_p, parts_m = [priors_px], [manual_px]
@@ -311,7 +326,7 @@ def extract(
     finally:
         if bar is not None:
             bar.stop()
-    for c, run in enumerate(runs):
+    for c, run in enumerate(runs if ref_frame is None else ()):
         # the chamber (flat line, rim, well) is found in the first frame: a dome already standing there can
         # bend it (measured: from Vtilde ~0.1 on the search fails, at 0.4 the rim came out 5 px narrow)
         h0 = run.scal["bulge_height"][0] / p
@@ -325,9 +340,33 @@ def extract(
 
     parts = [_dataset(r, times, p, chamber_attrs, src, settings, bulge_direction, chamber_region, errors, metadata,
                       fit_prestretch) for r in runs]
+    for ds in parts:
+        ds.attrs["reference_frame"] = ref_name
+        if ref_frame is not None and ds.attrs["reference_source"].startswith("image"):
+            ds.attrs["reference_source"] = "image (reference frame)"
     if chamber_region != "all":
         return parts[0]
     return stack_chambers(parts, [f"chamber-{c}" for c in range(len(parts))])
+
+
+def _reference(reference_frame, first, p):
+    """The reference frame (an array, or the first frame of an image / series path) and its name for the attrs."""
+    if reference_frame is None:
+        return None, "first frame"
+    if isinstance(reference_frame, str | os.PathLike):
+        from osmobulge.imaging.io import read_first_frame
+
+        frame, px = read_first_frame(reference_frame)
+        if px is not None and np.isfinite(px) and not np.isclose(px, p, rtol=1e-3, atol=0):
+            raise ValueError(f"reference_frame {reference_frame} has a pixel size of {px:.6g} m, the series "
+                             f"{p:.6g} m: they must be one field of view")
+        name = str(reference_frame)
+    else:
+        frame, name = np.asarray(reference_frame), "array"
+    if frame.ndim != 2 or frame.shape != np.shape(first):
+        raise ValueError(f"reference_frame must be one frame of the series' shape {np.shape(first)}, got shape "
+                         f"{frame.shape}")
+    return frame, name
 
 
 def _tracers(first, bulge_direction, chamber_region, settings):

@@ -66,6 +66,7 @@ import numpy as np
 __all__ = [
     "FrameSeries",
     "open_series",
+    "read_first_frame",
     "MetadataError",
     "FrameReadError",
     "write_series",
@@ -1120,6 +1121,21 @@ def open_series(
 # writers (synthetic series, tests, exports)
 # --------------------------------------------------------------------------------------
 _EPOCH = _dt.datetime(2024, 1, 1, 9, 0, 0)
+
+
+def read_first_frame(source, *, grey="luminance", channel=None):
+    """The first readable frame of an image, series file or folder, and its pixel size (m, None if not stored).
+
+    No timestamps are needed (unlike :func:`open_series`): for a single
+    reference frame, e.g. ``extract(..., reference_frame=path)``.
+    """
+    backend = _backend_for(source, grey, "auto", channel)
+    try:
+        if not backend.n:
+            raise ValueError(f"{source} holds no readable frame")
+        return np.asarray(backend.read(0)), backend.pixel_size
+    finally:
+        getattr(backend, "close", lambda: None)()
 
 
 def write_series(frames, path, *, fmt="tiff", pixel_size, timestamps=None, start=_EPOCH):
