@@ -134,6 +134,9 @@ _SCHEMA: dict[str, dict[str, _Key]] = {
                                 doc="Direction the dome rises in the image ('auto' detects it)."),
         "chamber_regions": _Key("regions", default=(), doc="Regions (pixels) when one field holds several "
                                 "chambers: a list of tables {name, rows = [r0, r1], cols = [c0, c1]}."),
+        "reference_frame": _Key("str", doc="When the frames start bulged (a later file of a split series): an "
+                                "image or series file whose first frame shows the flat membrane in the same "
+                                "field (e.g. the first file), relative to the experiment folder."),
     },
     "material": {
         "law": _Key("str", required=True, choices=_MATERIAL_LAWS, doc="Constitutive law."),
@@ -321,6 +324,8 @@ class ImagingSpec:
     bulge_direction : str
     chamber_regions : tuple of dict
         ``{"name", "rows": (r0, r1), "cols": (c0, c1)}`` in pixels.
+    reference_frame : str or None
+        The file (as written) whose first frame shows the flat membrane, when the frames start bulged.
     """
 
     frames: str
@@ -330,6 +335,7 @@ class ImagingSpec:
     timestamps_from_files: bool = False
     bulge_direction: str = "auto"
     chamber_regions: tuple = ()
+    reference_frame: str | None = None
 
 
 @dataclass(frozen=True)
@@ -645,6 +651,9 @@ def validate_metadata(data: dict, base=None, *, check_frames: bool = True, path=
                             f"expected a glob, a file or a folder of {', '.join(FRAME_SUFFIXES)} images")
         elif "timestamps_min" in im and len(files) > 1 and len(im["timestamps_min"]) != len(files):
             problems.append(f"[imaging] timestamps_min: {len(im['timestamps_min'])} times for {len(files)} frame files")
+    if check_frames and "reference_frame" in im and not (base / im["reference_frame"]).exists():
+        problems.append(f"[imaging] reference_frame = {im['reference_frame']!r}: no such file "
+                        f"({base / im['reference_frame']})")
 
     if problems:
         raise MetadataError(problems, path)
@@ -667,6 +676,7 @@ def validate_metadata(data: dict, base=None, *, check_frames: bool = True, path=
         timestamps_from_files=im.get("timestamps") == "files",
         bulge_direction=im["bulge_direction"],
         chamber_regions=im["chamber_regions"],
+        reference_frame=im.get("reference_frame"),
     )
     an = values["analysis"]
     analysis = AnalysisSpec(
@@ -774,6 +784,8 @@ frames = "{frames}"              # a glob, a multi-page TIFF/OME-TIFF/CZI file, 
 pixel_size_um = 2.0              # delete if the files carry the pixel size
 frame_interval_min = 15.0        # or: timestamps = "files"  or: timestamps_min = [0, 15, 30, ...]
 bulge_direction = "auto"         # "auto", "up", "down", "left" or "right"
+# reference_frame = "../day-1/frames.tif"  # frames that start bulged (a later file of a split series):
+#                                          # a file whose first frame shows the flat membrane
 # Several chambers in one field: one region each (pixel index ranges, [start, stop)).
 # chamber_regions = [
 #   {{ name = "left", rows = [0, 512], cols = [0, 400] }},

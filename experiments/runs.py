@@ -968,18 +968,32 @@ def process_experiment(exp: Experiment, results: Path, *, progress: Callable | N
         raise FramesError(f"priors at frame positions {bad}: outside 0..{n - 1}")
     priors_region = _manual_for_region(priors, regions, p, "prior")
     options = {"progress": False, **extract_options}
+    ref, ref_name = None, None
+    if im.reference_frame:  # the frames start bulged: the chamber is found in this file's first frame
+        from osmobulge.imaging.io import read_first_frame
+
+        ref_path = exp.path / im.reference_frame
+        ref, ref_px = read_first_frame(ref_path)
+        if ref_px is not None and not np.isclose(ref_px, p, rtol=1e-3, atol=0):
+            raise FramesError(f"[imaging] reference_frame {im.reference_frame!r} has a pixel size of "
+                              f"{ref_px:.6g} m, the frames {p:.6g} m: they must be one field of view")
+        ref_name = str(im.reference_frame)
     parts = []
     for k, region in enumerate(regions or [None]):
         arr = ef.frames
         r0 = c0 = 0
+        ref_k = ref
         if region is not None:
             (r0, r1), (c0, c1) = region["rows"], region["cols"]
             if r1 > arr.shape[1] or c1 > arr.shape[2]:
                 raise FramesError(f"chamber region {region['name']!r} rows {region['rows']} cols {region['cols']} "
                                   f"exceeds the frames ({arr.shape[1]} x {arr.shape[2]} px)")
             arr = arr[:, r0:r1, c0:c1]
+            ref_k = None if ref is None else ref[r0:r1, c0:c1]
         kwargs = {"pixel_size": p, "frame_interval": 1.0, "chamber": exp.chamber,
                   "bulge_direction": im.bulge_direction, "metadata": None, **options}
+        if ref_k is not None:
+            kwargs["reference_frame"] = ref_k
         if per_region[k]:
             kwargs["manual_profiles"] = per_region[k]
         if priors_region[k]:
@@ -992,6 +1006,8 @@ def process_experiment(exp: Experiment, results: Path, *, progress: Callable | N
         for v, off in (("profile_col", c0), ("profile_row", r0), ("axis_col", c0), ("axis_row", r0)):
             if v in ds and off:
                 ds[v] = ds[v] + off
+        if ref_name is not None:
+            ds.attrs["reference_frame"] = ref_name  # (extract saw an array)
         if region is not None:
             ds.attrs.update(region_name=region["name"], region_rows=list(region["rows"]),
                             region_cols=list(region["cols"]))

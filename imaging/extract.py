@@ -335,7 +335,8 @@ def extract(
             where = f"chamber {c}: " if len(runs) > 1 else ""
             warnings.warn(f"{where}the first frame's dome already stands {h0:.0f} px ({h0 / R0:.2f} of the rim "
                           f"radius) above the flat membrane; the chamber is found in the first frame, which must "
-                          f"show the flat membrane: rim radius, volumes and lambda_pre may be wrong",
+                          f"show the flat membrane: rim radius, volumes and lambda_pre may be wrong (a series that "
+                          f"starts bulged needs reference_frame= a frame of the flat membrane)",
                           UserWarning, stacklevel=2)
 
     parts = [_dataset(r, times, p, chamber_attrs, src, settings, bulge_direction, chamber_region, errors, metadata,

@@ -290,3 +290,26 @@ def test_frames_in_conflict_with_the_toml_are_bad_input(tmp_path):
     assert "pixel size" in res.outcomes[0].error
     assert not (d / "results" / "extraction.nc").exists()
     assert read_state(d)["steps"]["process"]["status"] == "failed"
+
+
+def test_a_later_file_of_a_split_series_with_reference_frame(tmp_path):
+    """[imaging] reference_frame: the day-2 frames start bulged; the chamber is found in day 1's flat frame."""
+    series = _render(np.linspace(0, 1.2, 8), seed=3)
+    whole = _write(tmp_path / "whole", series.frames)
+    assert run_experiment(whole, ["process"]).status == "ok"
+    later = _write(tmp_path / "day2", series.frames[4:], name="day2", extra='reference_frame = "../flat.tif"\n')
+    tifffile.imwrite(tmp_path / "flat.tif", series.frames[0])
+    out = run_experiment(later, ["process"])
+    assert out.status == "ok", out.error
+    ds = xr.load_dataset(later / "results" / "extraction.nc", engine="h5netcdf")
+    ref = xr.load_dataset(whole / "results" / "extraction.nc", engine="h5netcdf")
+    assert (ds["flag"].values == "ok").all() and ds.attrs["reference_frame"] == "../flat.tif"
+    np.testing.assert_allclose(ds["volume"].values, series.truth["volume"].values[4:], rtol=0.02, atol=0)
+    np.testing.assert_allclose(ds["volume"].values, ref["volume"].values[4:], rtol=5e-3, atol=0)
+    # without it the later file is measured with a warning naming the option; a missing reference is an error
+    bare = _write(tmp_path / "bare", series.frames[4:], name="bare")
+    with pytest.warns(UserWarning, match="needs reference_frame="):
+        run_experiment(bare, ["process"])
+    gone = _write(tmp_path / "gone", series.frames[4:], name="gone", extra='reference_frame = "nope.tif"\n')
+    res = run_experiment(gone, ["process"])
+    assert res.status != "ok" and "no such file" in res.error
