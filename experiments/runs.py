@@ -679,11 +679,14 @@ def _toml_content(exp: Experiment, *sections) -> dict:
 def _fp_process(exp: Experiment, options: dict) -> dict:
     from osmobulge.experiments.curation import curation_fingerprint, load_curation
 
+    ref = exp.imaging.reference_frame
     return {
         "frames": frames_fingerprint(exp),
         "toml": _toml_content(exp, "imaging", "chamber"),
         "curation": curation_fingerprint(load_curation(exp.path), "extraction"),
         "extract_options": options.get("extract", {}),
+        # the flat frame the chamber is found in: its content as much as its name
+        **({"reference_frame": file_sha256(exp.path / ref)} if ref else {}),
     }
 
 

@@ -306,6 +306,10 @@ def test_a_later_file_of_a_split_series_with_reference_frame(tmp_path):
     assert (ds["flag"].values == "ok").all() and ds.attrs["reference_frame"] == "../flat.tif"
     np.testing.assert_allclose(ds["volume"].values, series.truth["volume"].values[4:], rtol=0.02, atol=0)
     np.testing.assert_allclose(ds["volume"].values, ref["volume"].values[4:], rtol=5e-3, atol=0)
+    # up to date until the reference file itself changes
+    assert run_experiment(later, ["process"]).steps[0].status == "skipped"
+    tifffile.imwrite(tmp_path / "flat.tif", series.frames[0] + np.uint16(1))  # the same flat frame, other bytes
+    assert run_experiment(later, ["process"]).steps[0].status == "done"
     # without it the later file is measured with a warning naming the option; a missing reference is an error
     bare = _write(tmp_path / "bare", series.frames[4:], name="bare")
     with pytest.warns(UserWarning, match="needs reference_frame="):
