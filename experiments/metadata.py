@@ -401,6 +401,12 @@ class Experiment:
         return self.path / "results"
 
     @property
+    def reference_path(self) -> Path | None:
+        """``[imaging] reference_frame`` as a path (relative to the folder, ``~`` expanded), or None."""
+        ref = self.imaging.reference_frame
+        return None if not ref else self.path / Path(ref).expanduser()
+
+    @property
     def material(self):
         """The constitutive law (a :mod:`osmobulge.modeling.materials` object)."""
         return material_from_spec(self.material_spec)
@@ -651,9 +657,13 @@ def validate_metadata(data: dict, base=None, *, check_frames: bool = True, path=
                             f"expected a glob, a file or a folder of {', '.join(FRAME_SUFFIXES)} images")
         elif "timestamps_min" in im and len(files) > 1 and len(im["timestamps_min"]) != len(files):
             problems.append(f"[imaging] timestamps_min: {len(im['timestamps_min'])} times for {len(files)} frame files")
-    if check_frames and "reference_frame" in im and not (base / im["reference_frame"]).exists():
-        problems.append(f"[imaging] reference_frame = {im['reference_frame']!r}: no such file "
-                        f"({base / im['reference_frame']})")
+    if "reference_frame" in im and not str(im["reference_frame"]).strip():
+        problems.append("[imaging] reference_frame is empty: give a file, or delete the key")
+    elif check_frames and "reference_frame" in im:
+        target = base / Path(im["reference_frame"]).expanduser()
+        if not target.is_file():
+            problems.append(f"[imaging] reference_frame = {im['reference_frame']!r}: no such file ({target}); "
+                            f"give the image or series file whose first frame shows the flat membrane")
 
     if problems:
         raise MetadataError(problems, path)

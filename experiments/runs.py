@@ -117,8 +117,8 @@ def code_version() -> str:
     return f"{osmobulge.__version__}+{h.hexdigest()[:12]}"
 
 
-def frames_fingerprint(exp: Experiment) -> list:
-    """Content hashes of the experiment's frame files (cached by size and mtime).
+def frames_fingerprint(exp: Experiment, files=None) -> list:
+    """Content hashes of the experiment's frame files (or of ``files``), cached by size and mtime.
 
     Returns
     -------
@@ -131,7 +131,7 @@ def frames_fingerprint(exp: Experiment) -> list:
     except (OSError, json.JSONDecodeError):
         cache = {}
     out, changed = [], False
-    for f in exp.frame_files():
+    for f in (exp.frame_files() if files is None else files):
         st = f.stat()
         key = str(f.resolve())
         hit = cache.get(key)
@@ -686,7 +686,7 @@ def _fp_process(exp: Experiment, options: dict) -> dict:
         "curation": curation_fingerprint(load_curation(exp.path), "extraction"),
         "extract_options": options.get("extract", {}),
         # the flat frame the chamber is found in: its content as much as its name
-        **({"reference_frame": file_sha256(exp.path / ref)} if ref else {}),
+        **({"reference_frame": frames_fingerprint(exp, [exp.reference_path])} if ref else {}),
     }
 
 
@@ -975,8 +975,13 @@ def process_experiment(exp: Experiment, results: Path, *, progress: Callable | N
     if im.reference_frame:  # the frames start bulged: the chamber is found in this file's first frame
         from osmobulge.imaging.io import read_first_frame
 
-        ref_path = exp.path / im.reference_frame
-        ref, ref_px = read_first_frame(ref_path)
+        try:
+            ref, ref_px = read_first_frame(exp.reference_path)
+        except (ValueError, OSError) as err:
+            raise FramesError(f"[imaging] reference_frame {im.reference_frame!r}: {err}") from err
+        if ref.shape != ef.frames.shape[1:]:
+            raise FramesError(f"[imaging] reference_frame {im.reference_frame!r} is {ref.shape[0]} x {ref.shape[1]} "
+                              f"px, the frames {ef.frames.shape[1]} x {ef.frames.shape[2]} px: one field of view")
         if ref_px is not None and not np.isclose(ref_px, p, rtol=1e-3, atol=0):
             raise FramesError(f"[imaging] reference_frame {im.reference_frame!r} has a pixel size of "
                               f"{ref_px:.6g} m, the frames {p:.6g} m: they must be one field of view")
@@ -1088,8 +1093,15 @@ def observations_from_extraction(ds, exp: Experiment) -> list:
         if use.sum() < 3:
             raise ValueError(f"{label}: only {int(use.sum())} usable frames (kept, with a volume); need >= 3")
         attrs = {**chamber.to_attrs(), "label": label}
-        out.append(xr.Dataset({"volume_ratio": ("time", v[use], {"units": "1", "long_name": "V/V0"})},
-                              coords={"time": ("time", t[use], {"units": "s"})}, attrs=attrs))
+        tu, vu = t[use], v[use]
+        if str(ds.attrs.get("reference_frame", "first frame")) != "first frame":
+            # a later file of a split series (the chamber found in a reference frame): its clock starts long
+            # after the actuation did, so the flux ODE (autonomous: dV/dt depends on V alone) starts from the
+            # state measured at its first usable frame, v0 = that V/V0 at t = 0, not from V/V0 = 1
+            attrs["v0"] = float(vu[0])
+            tu = tu - tu[0]
+        out.append(xr.Dataset({"volume_ratio": ("time", vu, {"units": "1", "long_name": "V/V0"})},
+                              coords={"time": ("time", tu, {"units": "s"})}, attrs=attrs))
     return out
 
 

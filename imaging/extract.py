@@ -280,6 +280,16 @@ def extract(
         raise ChamberNotFound(f"{err} -- the chamber is found in the first frame, which must show the flat membrane "
                          f"(a series that starts with the dome already grown, e.g. the second file of a split "
                          f"series, needs reference_frame= a frame of the flat membrane)") from err
+    if ref_frame is not None:  # the reference must be flat itself: traced once (by a copy of each tracer)
+        import copy
+
+        for c, t in enumerate(tracers):
+            h0, R0 = copy.deepcopy(t).process(ref_frame, 0).height, t.ref.rim_radius
+            if np.isfinite(h0) and h0 > FIRST_FRAME_HEIGHT * R0:
+                where = f"chamber {c}: " if len(tracers) > 1 else ""
+                warnings.warn(f"{where}the reference frame's dome already stands {h0:.0f} px ({h0 / R0:.2f} of "
+                              f"the rim radius) above the flat membrane; it must show the flat membrane: rim "
+                              f"radius, volumes and lambda_pre may be wrong", UserWarning, stacklevel=2)
     view = FrameView(first, tracers[0].k)
     if len(tracers) == 1:
         parts_p, parts_m = [priors_px], [manual_px]
@@ -367,6 +377,9 @@ def _reference(reference_frame, first, p):
     if frame.ndim != 2 or frame.shape != np.shape(first):
         raise ValueError(f"reference_frame must be one frame of the series' shape {np.shape(first)}, got shape "
                          f"{frame.shape}")
+    if frame.dtype != np.asarray(first).dtype:  # the flat band's contrast sets every frame's thresholds
+        raise ValueError(f"reference_frame is {frame.dtype}, the series {np.asarray(first).dtype}: it must come "
+                         f"from the same camera and settings (the same grey scale)")
     return frame, name
 
 
@@ -604,8 +617,10 @@ def _dataset(run, times, p, chamber_attrs, src, settings, bulge_direction, chamb
         "flag_value": var(scal["flag_value"], "1", "value of the figure that set the flag (units of that figure)"),
         "message": var(message.astype(str), None, "why a frame could not be measured"),
         "tilt": var(scal["tilt"], "deg", "tilt of the flat membrane, counter-clockwise as displayed"),
-        "drift_x": var(scal["drift_x"], "px", "drift of the chamber along the view columns since frame 0"),
-        "drift_y": var(scal["drift_y"], "px", "drift of the chamber along the view rows since frame 0"),
+        "drift_x": var(scal["drift_x"], "px", "drift of the chamber along the view columns since frame 0 "
+                       "(or the reference frame)"),
+        "drift_y": var(scal["drift_y"], "px", "drift of the chamber along the view rows since frame 0 "
+                       "(or the reference frame)"),
         "axis_col": var(scal["axis_col"], "px", "column where the chamber axis meets the flat membrane"),
         "axis_row": var(scal["axis_row"], "px", "row where the chamber axis meets the flat membrane"),
         "well_depth": var(scal["well_depth"], "m", "well depth measured in the first frame"),

@@ -306,6 +306,15 @@ def test_a_later_file_of_a_split_series_with_reference_frame(tmp_path):
     assert (ds["flag"].values == "ok").all() and ds.attrs["reference_frame"] == "../flat.tif"
     np.testing.assert_allclose(ds["volume"].values, series.truth["volume"].values[4:], rtol=0.02, atol=0)
     np.testing.assert_allclose(ds["volume"].values, ref["volume"].values[4:], rtol=5e-3, atol=0)
+    np.testing.assert_allclose(ds["rim_radius"].values, series.truth["rim_radius"].values[4:], rtol=0, atol=1e-6)
+    # the fit starts from the state measured at the file's first frame (its clock starts late): v0 = that V/V0
+    from osmobulge.experiments.metadata import load_experiment as load
+    from osmobulge.experiments.runs import observations_from_extraction
+
+    (obs,) = observations_from_extraction(ds, load(later))
+    assert obs.attrs["v0"] == pytest.approx(float(ds["volume_ratio"].values[0]), rel=1e-12, abs=0)
+    assert obs["time"].values[0] == 0.0 and obs.attrs["v0"] > 1.2
+    assert "v0" not in observations_from_extraction(ref, load(whole))[0].attrs
     # up to date until the reference file itself changes
     assert run_experiment(later, ["process"]).steps[0].status == "skipped"
     tifffile.imwrite(tmp_path / "flat.tif", series.frames[0] + np.uint16(1))  # the same flat frame, other bytes
@@ -317,3 +326,17 @@ def test_a_later_file_of_a_split_series_with_reference_frame(tmp_path):
     gone = _write(tmp_path / "gone", series.frames[4:], name="gone", extra='reference_frame = "nope.tif"\n')
     res = run_experiment(gone, ["process"])
     assert res.status != "ok" and "no such file" in res.error
+    for bad, why in (('""', "is empty"), ('"../day2"', "no such file")):  # a folder is not a frame file
+        d = _write(tmp_path / f"bad{len(why)}", series.frames[4:], name="bad", extra=f"reference_frame = {bad}\n")
+        res = run_experiment(d, ["process"])
+        assert res.status != "ok" and why in res.error, res.error
+    # a reference of another field of view is refused, also when a chamber region would crop both alike
+    tifffile.imwrite(tmp_path / "big.tif", np.pad(series.frames[0], 20, mode="edge"))
+    region = '\nchamber_regions = [{ name = "c", rows = [0, 160], cols = [0, 220] }]\n'
+    d = _write(tmp_path / "big", series.frames[4:], name="big", extra='reference_frame = "../big.tif"' + region)
+    res = run_experiment(d, ["process"])
+    assert res.status == "invalid" and "one field of view" in res.error, (res.status, res.error)
+    tifffile.imwrite(tmp_path / "notes.tif", np.zeros((3, 4, 5, 6), np.uint16))
+    d = _write(tmp_path / "junk", series.frames[4:], name="junk", extra='reference_frame = "../notes.tif"\n')
+    res = run_experiment(d, ["process"])
+    assert res.status == "invalid" and "reference_frame" in res.error, (res.status, res.error)

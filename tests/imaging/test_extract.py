@@ -386,6 +386,11 @@ def test_a_split_series_is_measured_with_the_first_files_flat_frame(tmp_path):
         np.testing.assert_allclose(part.drift_x - whole.drift_x.isel(time=slice(6, None)).values, -7.0, atol=1.0)
     with pytest.raises(ValueError, match="series' shape"):
         extract(later, pixel_size=1e-6, frame_interval=600.0, progress=False, reference_frame=s.frames[0][:-1])
+    with pytest.raises(ValueError, match="same grey scale"):
+        extract(later, pixel_size=1e-6, frame_interval=600.0, progress=False,
+                reference_frame=s.frames[0].astype(np.float64))
+    with pytest.warns(UserWarning, match="reference frame's dome already stands"):  # a bulged reference is said
+        extract(later[:2], pixel_size=1e-6, frame_interval=600.0, progress=False, reference_frame=s.frames[1])
     tifffile.imwrite(tmp_path / "other.tif", s.frames[0], resolution=(5e3, 5e3), resolutionunit="CENTIMETER")  # 2 um
     with pytest.raises(ValueError, match="pixel size"):
         extract(later, pixel_size=1e-6, frame_interval=600.0, progress=False, reference_frame=tmp_path / "other.tif")
