@@ -336,7 +336,7 @@ def test_a_later_file_of_a_split_series_with_reference_frame(tmp_path):
     d = _write(tmp_path / "big", series.frames[4:], name="big", extra='reference_frame = "../big.tif"' + region)
     res = run_experiment(d, ["process"])
     assert res.status == "invalid" and "one field of view" in res.error, (res.status, res.error)
-    tifffile.imwrite(tmp_path / "notes.tif", np.zeros((3, 4, 5, 6), np.uint16))
+    (tmp_path / "notes.tif").write_text("not an image")  # a file named like one
     d = _write(tmp_path / "junk", series.frames[4:], name="junk", extra='reference_frame = "../notes.tif"\n')
     res = run_experiment(d, ["process"])
     assert res.status == "invalid" and "reference_frame" in res.error, (res.status, res.error)
