@@ -976,15 +976,12 @@ def process_experiment(exp: Experiment, results: Path, *, progress: Callable | N
         from osmobulge.imaging.io import read_first_frame
 
         try:
-            ref, ref_px = read_first_frame(exp.reference_path)
+            ref, _ = read_first_frame(exp.reference_path, pixel_size=p)  # (a pixel-size conflict is said there)
         except (ValueError, OSError) as err:
             raise FramesError(f"[imaging] reference_frame {im.reference_frame!r}: {err}") from err
-        if ref.shape != ef.frames.shape[1:]:
+        if ref.shape != ef.frames.shape[1:]:  # before any region crops both alike
             raise FramesError(f"[imaging] reference_frame {im.reference_frame!r} is {ref.shape[0]} x {ref.shape[1]} "
                               f"px, the frames {ef.frames.shape[1]} x {ef.frames.shape[2]} px: one field of view")
-        if ref_px is not None and not np.isclose(ref_px, p, rtol=1e-3, atol=0):
-            raise FramesError(f"[imaging] reference_frame {im.reference_frame!r} has a pixel size of "
-                              f"{ref_px:.6g} m, the frames {p:.6g} m: they must be one field of view")
         ref_name = str(im.reference_frame)
     parts = []
     for k, region in enumerate(regions or [None]):
@@ -1071,6 +1068,8 @@ def observations_from_extraction(ds, exp: Experiment) -> list:
     import numpy as np
     import xarray as xr
 
+    from osmobulge.imaging.extract import OWN_FIRST_FRAME
+
     chamber = exp.chamber
     kept = np.asarray(ds["kept"].values, bool) if "kept" in ds else np.ones(ds.sizes["time"], bool)
     if "volume_ratio" in ds:
@@ -1094,10 +1093,10 @@ def observations_from_extraction(ds, exp: Experiment) -> list:
             raise ValueError(f"{label}: only {int(use.sum())} usable frames (kept, with a volume); need >= 3")
         attrs = {**chamber.to_attrs(), "label": label}
         tu, vu = t[use], v[use]
-        if str(ds.attrs.get("reference_frame", "first frame")) != "first frame":
+        if str(ds.attrs.get("reference_frame", OWN_FIRST_FRAME)) != OWN_FIRST_FRAME:
             # a later file of a split series (the chamber found in a reference frame): its clock starts long
-            # after the actuation did, so the flux ODE (autonomous: dV/dt depends on V alone) starts from the
-            # state measured at its first usable frame, v0 = that V/V0 at t = 0, not from V/V0 = 1
+            # after the actuation did, so the flux ODE (main text Eqn 8; autonomous: dV/dt depends on V alone)
+            # starts from the state measured at its first usable frame, v0 = that V/V0 at t = 0, not from 1
             attrs["v0"] = float(vu[0])
             tu = tu - tu[0]
         out.append(xr.Dataset({"volume_ratio": ("time", vu, {"units": "1", "long_name": "V/V0"})},

@@ -157,9 +157,8 @@ class Line:
 
     def shifted(self, du=0.0, dz=0.0):
         """Same line with its origin moved by ``du`` along and ``dz`` across it."""
-        d0, d1, n0, n1 = self._dn
-        du, dz = float(du), float(dz)
-        return Line(float(self.x0) + du * d0 + dz * n0, float(self.y0) + du * d1 + dz * n1, self.angle)
+        x, y = self.point(float(du), float(dz))
+        return Line(float(x), float(y), self.angle)
 
 
 @dataclass(frozen=True)

@@ -284,12 +284,8 @@ def extract(
         import copy
 
         for c, t in enumerate(tracers):
-            h0, R0 = copy.deepcopy(t).process(ref_frame, 0).height, t.ref.rim_radius
-            if np.isfinite(h0) and h0 > FIRST_FRAME_HEIGHT * R0:
-                where = f"chamber {c}: " if len(tracers) > 1 else ""
-                warnings.warn(f"{where}the reference frame's dome already stands {h0:.0f} px ({h0 / R0:.2f} of "
-                              f"the rim radius) above the flat membrane; it must show the flat membrane: rim "
-                              f"radius, volumes and lambda_pre may be wrong", UserWarning, stacklevel=2)
+            _warn_if_bulged(copy.deepcopy(t).process(ref_frame, 0).height, t.ref.rim_radius, "reference frame",
+                            f"chamber {c}: " if len(tracers) > 1 else "")
     view = FrameView(first, tracers[0].k)
     if len(tracers) == 1:
         parts_p, parts_m = [priors_px], [manual_px]
@@ -339,15 +335,9 @@ def extract(
     for c, run in enumerate(runs if ref_frame is None else ()):
         # the chamber (flat line, rim, well) is found in the first frame: a dome already standing there can
         # bend it (measured: from Vtilde ~0.1 on the search fails, at 0.4 the rim came out 5 px narrow)
-        h0 = run.scal["bulge_height"][0] / p
-        R0 = run.tracer.ref.rim_radius
-        if np.isfinite(h0) and h0 > FIRST_FRAME_HEIGHT * R0:
-            where = f"chamber {c}: " if len(runs) > 1 else ""
-            warnings.warn(f"{where}the first frame's dome already stands {h0:.0f} px ({h0 / R0:.2f} of the rim "
-                          f"radius) above the flat membrane; the chamber is found in the first frame, which must "
-                          f"show the flat membrane: rim radius, volumes and lambda_pre may be wrong (a series that "
-                          f"starts bulged needs reference_frame= a frame of the flat membrane)",
-                          UserWarning, stacklevel=2)
+        _warn_if_bulged(run.scal["bulge_height"][0] / p, run.tracer.ref.rim_radius, "first frame",
+                        f"chamber {c}: " if len(runs) > 1 else "",
+                        " (a series that starts bulged needs reference_frame= a frame of the flat membrane)")
 
     parts = [_dataset(r, times, p, chamber_attrs, src, settings, bulge_direction, chamber_region, errors, metadata,
                       fit_prestretch) for r in runs]
@@ -363,14 +353,11 @@ def extract(
 def _reference(reference_frame, first, p):
     """The reference frame (an array, or the first frame of an image / series path) and its name for the attrs."""
     if reference_frame is None:
-        return None, "first frame"
+        return None, OWN_FIRST_FRAME
     if isinstance(reference_frame, str | os.PathLike):
         from osmobulge.imaging.io import read_first_frame
 
-        frame, px = read_first_frame(reference_frame)
-        if px is not None and np.isfinite(px) and not np.isclose(px, p, rtol=1e-3, atol=0):
-            raise ValueError(f"reference_frame {reference_frame} has a pixel size of {px:.6g} m, the series "
-                             f"{p:.6g} m: they must be one field of view")
+        frame, _ = read_first_frame(reference_frame, pixel_size=p)
         name = str(reference_frame)
     else:
         frame, name = np.asarray(reference_frame), "array"
@@ -410,6 +397,17 @@ def _tracers(first, bulge_direction, chamber_region, settings):
 #: first-frame dome height, as a fraction of the rim radius, above which extract warns (the first frame
 #: must show the flat membrane; a first frame at Vtilde 0.05, height 0.1 a, still measures within 0.2 %)
 FIRST_FRAME_HEIGHT = 0.2
+#: the ``reference_frame`` attr of an extraction whose chamber was found in the source's own first frame
+OWN_FIRST_FRAME = "first frame"
+
+
+def _warn_if_bulged(height, rim_radius, which, where, hint=""):
+    """Warn when the frame the chamber was found in (``which``) shows a dome above FIRST_FRAME_HEIGHT (px)."""
+    if np.isfinite(height) and height > FIRST_FRAME_HEIGHT * rim_radius:
+        warnings.warn(f"{where}the {which}'s dome already stands {height:.0f} px ({height / rim_radius:.2f} of the "
+                      f"rim radius) above the flat membrane; the chamber is found in the {which}, which must show "
+                      f"the flat membrane: rim radius, volumes and lambda_pre may be wrong{hint}", UserWarning,
+                      stacklevel=3)
 
 
 class _Run:

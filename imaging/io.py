@@ -1123,19 +1123,25 @@ def open_series(
 _EPOCH = _dt.datetime(2024, 1, 1, 9, 0, 0)
 
 
-def read_first_frame(source, *, grey="luminance", channel=None):
+def read_first_frame(source, *, pixel_size=None, grey="luminance", channel=None):
     """The first readable frame of an image, series file or folder, and its pixel size (m, None if not stored).
 
     No timestamps are needed (unlike :func:`open_series`): for a single
-    reference frame, e.g. ``extract(..., reference_frame=path)``.
+    reference frame, e.g. ``extract(..., reference_frame=path)``.  With
+    ``pixel_size`` (m), a file that stores another one (beyond 0.1 %) is a
+    :class:`MetadataError` naming both.
     """
     backend = _backend_for(source, grey, "auto", channel)
     try:
         if not backend.n:
             raise ValueError(f"{source} holds no readable frame")
-        return np.asarray(backend.read(0)), backend.pixel_size
+        frame, px = np.asarray(backend.read(0)), backend.pixel_size
     finally:
         getattr(backend, "close", lambda: None)()
+    if pixel_size is not None and px is not None and not math.isclose(px, pixel_size, rel_tol=1e-3):
+        raise MetadataError(f"{source} has a pixel size of {px:.6g} m, the series {pixel_size:.6g} m: "
+                            f"they must be one field of view")
+    return frame, px
 
 
 def write_series(frames, path, *, fmt="tiff", pixel_size, timestamps=None, start=_EPOCH):

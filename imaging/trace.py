@@ -213,18 +213,6 @@ class FrameTrace:
 
 # ---------------------------------------------------------------------------------- helpers
 # ---------------------------------------------------------------------------------- tracer
-def _percentile90(x):
-    """``np.percentile(abs(x[finite]), 90)`` (nan for none), as :func:`~osmobulge.imaging._kernels.abs_percentile`."""
-    v = np.abs(x[np.isfinite(x)])
-    if not v.size:
-        return np.nan
-    v.sort()
-    pos = 0.9 * (v.size - 1)
-    lo = int(pos)
-    hi = min(lo + 1, v.size - 1)
-    return float(v[lo] + (pos - lo) * (v[hi] - v[lo]))
-
-
 class ChamberTracer:
     """Follows one chamber through a series, one frame at a time (constant memory).
 
@@ -471,7 +459,7 @@ class ChamberTracer:
                                                   thickness=g0.thickness, window=win)
         if not coarse:
             # the fine window holds the band only when it moved less than a few px: else its contrast drops
-            d0, d1, n0, n1 = line._dn
+            _, _, n0, n1 = line._dn
             dz = abs((line.x0 - predicted.x0) * n0 + (line.y0 - predicted.y0) * n1)
             if not (dz < 6.0 and abs(con) > 0.5 * abs(g0.contrast)):
                 return None, drift
@@ -1085,7 +1073,9 @@ class ChamberTracer:
             # the first pass's offsets from the predicted dome are the prediction error (after a global
             # trace unknown: the next frame tries tracking, its window's edges guard it)
             self._motion = tr["motion"] if tr["mode"] != "global" else 0.0
-            self._band = _percentile90(tr["width"][tr["use"]])
+            wd = tr["width"][tr["use"]]
+            wd = np.sort(np.abs(wd[np.isfinite(wd)]))
+            self._band = float(sorted_quantile(wd, 0.9)) if wd.size else np.nan
             self._tracking = True
         return out
 
