@@ -245,6 +245,23 @@ def test_end_to_end_permeability_recovered():
     fit = fit_permeability([ok], PDMS, model="double_exponential", lambda_pre=measured)
     assert fit.p_at_rest == pytest.approx(DoubleExponential.PDMS(1.0), rel=0.05, abs=0)
 
+    # the later file of the same series split at hour 10 (V/V0 about 4), measured with the flat first frame as
+    # the reference and fitted from its measured state (observations_from_extraction: v0 and time from its first
+    # frame): P_w over the stretches it covers, against the law the series was simulated with
+    from types import SimpleNamespace
+
+    from osmobulge.experiments.runs import observations_from_extraction
+
+    later = extract(s.frames[10:], pixel_size=2e-6, frame_interval=3600.0, chamber=ch, progress=False,
+                    reference_frame=s.frames[0])
+    assert (later.flag == "ok").all()
+    (obs,) = observations_from_extraction(later, SimpleNamespace(chamber=ch, name="later"))
+    assert obs.attrs["v0"] == pytest.approx(float(sim.volume_ratio[10]), rel=0.01, abs=0)
+    fit_later = fit_permeability([obs], PDMS, model="double_exponential", lambda_pre=pre)
+    for lam_bar in (1.5, 2.0, 2.5):
+        assert float(fit_later.permeability(lam_bar)) == pytest.approx(DoubleExponential.PDMS(lam_bar), rel=0.02,
+                                                                       abs=0)
+
 
 def test_all_chambers_in_the_field_are_stacked(tmp_path):
     """chamber_region="all": three wells, each traced, stacked along `chamber` left to right, volumes from the truth."""
