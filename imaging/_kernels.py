@@ -31,7 +31,8 @@ __all__ = ["sample_transects", "ends_noise", "band_edges_rows", "step_crossing_r
            "viterbi_rows", "lsq_spline", "fill_rows_nanmedian", "nanmedian", "longest_run", "running_percentile",
            "low_contrast_run", "ellipse_distance_folded", "robust_profile_spline", "pass_tail", "strongest_edge",
            "native_frame", "guide_transects", "revolution_halves", "clean_stations", "track_pass", "rim_bridge",
-           "rim_zone", "abs_percentile", "extrapolated_curve", "rim_contact", "curve_extent", "clear_of_curve",
+           "rim_zone", "rim_guide", "masked_nanmedian", "abs_percentile", "extrapolated_curve", "rim_contact",
+           "curve_extent", "clear_of_curve",
            "ellipse_scatter", "conic_parameters", "direct_ellipse", "ellipse_arc_volume", "profile_ellipse",
            "arc_resample", "dusty_rows", "wall_rows", "locate_walls", "ridge_rows", "block_mean", "signed_profiles",
            "compiled_on_disk"]
@@ -308,6 +309,63 @@ def _lsq_normal(x, y, t, w, ata, aty):
                 ata[ia, c - a] += wi * b[a] * b[c]
             for d in range(nd):
                 aty[ia, d] += wi * b[a] * y[i, d]
+
+
+@njit(cache=True, nogil=True)
+def _cubic_table(t, x):
+    """Spans and the 4 non-zero cubic B-splines at each x (sorted, inside the base interval): ``(spans, B)``.
+
+    What :func:`_lsq_normal` and :func:`_bspl_eval` compute point by point
+    (the same span walk and :func:`_basis`), once for both: a fit and its
+    residuals at the same points share them.
+    """
+    nx = x.shape[0]
+    n = t.shape[0] - 4
+    spans = np.empty(nx, np.int64)
+    B = np.empty((nx, 4))
+    b = np.empty(4)
+    left = np.empty(4)
+    right = np.empty(4)
+    l, x_prev = 3, -np.inf
+    for i in range(nx):
+        xi = x[i]
+        l = _next_span(t, 3, n, xi, l, x_prev)
+        x_prev = xi
+        _basis(t, 3, l, xi, b, left, right)
+        spans[i] = l
+        for a in range(4):
+            B[i, a] = b[a]
+    return spans, B
+
+
+@njit(cache=True, nogil=True)
+def _lsq_normal_table(spans, B, y, w, ata, aty):
+    """:func:`_lsq_normal` from a :func:`_cubic_table` (the same sums in the same order)."""
+    nd = y.shape[1]
+    for i in range(spans.shape[0]):
+        wi = w[i] * w[i]
+        if wi == 0.0:
+            continue
+        l = spans[i]
+        for a in range(4):
+            ia = l - 3 + a
+            for c in range(a, 4):
+                ata[ia, c - a] += wi * B[i, a] * B[i, c]
+            for d in range(nd):
+                aty[ia, d] += wi * B[i, a] * y[i, d]
+
+
+@njit(cache=True, nogil=True)
+def _eval_table(spans, B, c, out):
+    """:func:`_bspl_eval` (cubic) from a :func:`_cubic_table` of the same knots."""
+    nd = c.shape[1]
+    for i in range(spans.shape[0]):
+        l = spans[i]
+        for d in range(nd):
+            s = 0.0
+            for a in range(4):
+                s += B[i, a] * c[l - 3 + a, d]
+            out[i, d] = s
 
 
 @njit(cache=True, nogil=True)
@@ -891,12 +949,13 @@ def _quantile_knots(u, sel, spacing, chord, lo, hi):
 
 
 @njit(cache=True, nogil=True)
-def _weighted_fit(u, pts, w, t):
-    """Least-squares cubic spline coefficients (n, 2); ok False when the band system is not positive definite."""
+def _weighted_fit(spans, B, pts, w, t):
+    """Least-squares cubic spline coefficients (n, 2) from a :func:`_cubic_table` of the points' parameters;
+    ok False when the band system is not positive definite."""
     n = t.shape[0] - 4
     ata = np.zeros((n, 4))
     aty = np.zeros((n, 2))
-    _lsq_normal(u, pts, t, w, ata, aty)
+    _lsq_normal_table(spans, B, pts, w, ata, aty)
     ok = _band_cholesky_solve(ata, aty)
     if ok:
         for i in range(n):
@@ -957,10 +1016,11 @@ def robust_profile_spline(U, Z, ks, pinned, step):
                         chord += np.hypot(U[i] - U[prev], Z[i] - Z[prev])
                     prev = i
             t = _quantile_knots(u, w > 0.0, spacing, chord, u[0], u[n - 1])
-            c, ok = _weighted_fit(u, pts, w, t)
+            spans, B = _cubic_table(t, u)
+            c, ok = _weighted_fit(spans, B, pts, w, t)
             if not ok:
                 return 1, keep, empty_t, empty_c, empty_v, empty_v, empty_v, empty_c
-            _bspl_eval(t, c, 3, u, fit)
+            _eval_table(spans, B, c, fit)
             cnt = 0
             for i in range(n):
                 res[i] = np.hypot(fit[i, 0] - U[i], fit[i, 1] - Z[i])
@@ -1009,11 +1069,12 @@ def robust_profile_spline(U, Z, ks, pinned, step):
         ch[j] = ch[j - 1] + np.hypot(p[j, 0] - p[j - 1, 0], p[j, 1] - p[j - 1, 1])
     uf = ch / ch[m - 1]
     t = _quantile_knots(uf, np.ones(m, np.bool_), ks, ch[m - 1], 0.0, 1.0)
-    c, ok = _weighted_fit(uf, p, ww, t)
+    spans, B = _cubic_table(t, uf)
+    c, ok = _weighted_fit(spans, B, p, ww, t)
     if not ok:
         return 1, keep, empty_t, empty_c, empty_v, empty_v, empty_v, empty_c
     pf = np.empty((m, 2))
-    _bspl_eval(t, c, 3, uf, pf)
+    _eval_table(spans, B, c, pf)
     resid = np.full(n, np.nan)
     for j in range(m):
         resid[idx[j]] = np.hypot(pf[j, 0] - p[j, 0], pf[j, 1] - p[j, 1])
@@ -1321,6 +1382,53 @@ def rim_zone(u, z, R, zc, near):
     for i in range(u.shape[0]):
         out[i] = _excluded(u[i], z[i], R, zc, near)
     return out
+
+
+@njit(cache=True, nogil=True)
+def rim_guide(guide, R, zc, near):
+    """A dome guide from rim to rim: its points outside the rim zones, then the rim points at both ends.
+
+    ``guide`` (N, 2) of ``(u, z)`` (chamber px): the points not in
+    :func:`rim_zone`, in order from the left rim (reversed when the first
+    kept point lies right of the last), between ``(-R, 0)`` and ``(R, 0)``.
+    Returns ``(ok, out)``; ``ok`` False when fewer than 3 points are kept
+    (``out`` is then empty: the caller starts from a straight guide).
+    """
+    n = guide.shape[0]
+    keep = np.empty(n, np.bool_)
+    m = 0
+    for i in range(n):
+        keep[i] = not _excluded(guide[i, 0], guide[i, 1], R, zc, near)
+        m += keep[i]
+    if m < 3:
+        return False, np.empty((0, 2))
+    idx = np.flatnonzero(keep)
+    if guide[idx[0], 0] > guide[idx[m - 1], 0]:
+        idx = idx[::-1]
+    out = np.empty((m + 2, 2))
+    out[0, 0], out[0, 1] = -R, 0.0
+    for j in range(m):
+        out[1 + j, 0], out[1 + j, 1] = guide[idx[j], 0], guide[idx[j], 1]
+    out[m + 1, 0], out[m + 1, 1] = R, 0.0
+    return True, out
+
+
+@njit(cache=True, nogil=True)
+def masked_nanmedian(x, exclude):
+    """``np.nanmedian(x[~exclude])`` (nan when no finite value is left)."""
+    n = 0
+    for i in range(x.shape[0]):
+        if not exclude[i] and np.isfinite(x[i]):
+            n += 1
+    if n == 0:
+        return np.nan
+    v = np.empty(n)
+    j = 0
+    for i in range(x.shape[0]):
+        if not exclude[i] and np.isfinite(x[i]):
+            v[j] = x[i]
+            j += 1
+    return np.median(v)
 
 
 @njit(cache=True, nogil=True)
@@ -2375,11 +2483,23 @@ def block_mean(frame, f):
     for bi in range(h):
         acc[:] = 0.0
         for r in range(bi * f, bi * f + f):
-            for bj in range(w):
-                s = 0.0
-                for c in range(bj * f, bj * f + f):
-                    s += frame[r, c]
-                acc[bj] += s
+            row = frame[r]
+            # each row's f samples summed left to right, then added to the block's sum (the order of the
+            # general loop; the unrolled f = 2 and 4, the usual factors, run 3-5x faster)
+            if f == 2:
+                for bj in range(w):
+                    acc[bj] += np.float64(row[2 * bj]) + np.float64(row[2 * bj + 1])
+            elif f == 4:
+                for bj in range(w):
+                    c = 4 * bj
+                    acc[bj] += ((np.float64(row[c]) + np.float64(row[c + 1])) + np.float64(row[c + 2])
+                                + np.float64(row[c + 3]))
+            else:
+                for bj in range(w):
+                    s = 0.0
+                    for c in range(bj * f, bj * f + f):
+                        s += row[c]
+                    acc[bj] += s
         for bj in range(w):
             out[bi, bj] = acc[bj] * inv
     return out

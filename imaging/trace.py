@@ -74,9 +74,11 @@ from osmobulge.imaging._kernels import (
     locate_walls,
     low_contrast_run,
     lsq_spline,
+    masked_nanmedian,
     native_frame,
     pass_tail,
     rim_contact,
+    rim_guide,
     rim_zone,
     robust_profile_spline,
     track_pass,
@@ -442,7 +444,8 @@ class ChamberTracer:
         angle, well = g0.line.angle, g0.well
         if self.prev is not None and self.prev.geometry is not None:
             angle = self.prev.geometry.line.angle
-            well = replace(self.prev.geometry.well, depth=g0.well.depth)
+            w = self.prev.geometry.well
+            well = Well(w.u_left, w.u_right, w.slope_left, w.slope_right, g0.well.depth)
         line = Line(g0.line.x0 + drift[0], g0.line.y0 + drift[1], angle)
         if coarse:
             line = self._coarse_line(view, line)
@@ -468,11 +471,12 @@ class ChamberTracer:
             return None, drift
         ax = well.centre
         line = line.shifted(ax, 0.0)
-        well = replace(well, u_left=well.u_left - ax, u_right=well.u_right - ax)
+        well = Well(well.u_left - ax, well.u_right - ax, well.slope_left, well.slope_right, well.depth)
         if not (np.isfinite(con) and abs(con) > 0.3 * abs(g0.contrast)):
             con = g0.contrast  # too few clean flat columns in this frame: keep the first frame's
-        geom = replace(g0, line=line, rim_radius=well.half_width, well=well, contrast=con, line_rms=rms,
-                       wall_rms=wall_rms)
+        # (direct constructors, not dataclasses.replace: this runs every frame)
+        geom = ChamberGeometry(line=line, thickness=g0.thickness, polarity=g0.polarity, rim_radius=well.half_width,
+                               well=well, others=g0.others, contrast=con, line_rms=rms, wall_rms=wall_rms)
         return geom, drift
 
     # ---------------------------------------------------------------------- guides
@@ -642,15 +646,10 @@ class ChamberTracer:
             else:
                 gu = guide
                 half = st.search if mode == "guide" else half_track
-            gu = np.asarray(gu, float)
-            # guide from rim to rim through the current rim points
-            keep = ~self._exclusion(g, gu[:, 0], gu[:, 1])
-            gu = gu[keep]
-            if len(gu) < 3:
-                gu = np.c_[np.linspace(-R, R, 20), np.zeros(20)]
-            if gu[0, 0] > gu[-1, 0]:
-                gu = gu[::-1]
-            gu = np.concatenate([[[-R, 0.0]], gu, [[R, 0.0]]])
+            # guide from rim to rim through the current rim points (its points in the rim zones dropped)
+            ok, gu = rim_guide(np.ascontiguousarray(gu, np.float64), float(R), *self._exclusion_zone(g))
+            if not ok:
+                gu = np.concatenate([[[-R, 0.0]], np.c_[np.linspace(-R, R, 20), np.zeros(20)], [[R, 0.0]]])
             res = self._passes(view, g, gu, half, track=mode == "track")
             if res is not None:
                 res["mode"] = mode
@@ -700,7 +699,8 @@ class ChamberTracer:
     def _dome_median(tr):
         """Median band contrast of a pass's dome stations (not excluded; once per pass, kept in ``tr``)."""
         if "dome_median" not in tr:
-            tr["dome_median"] = _nanmedian(tr["contrast"][~tr["excluded"]])
+            con = np.ascontiguousarray(tr["contrast"], np.float64)
+            tr["dome_median"] = float(masked_nanmedian(con, tr["excluded"]))
         return tr["dome_median"]
 
     def _clean(self, g, r, ref_con):
@@ -881,7 +881,10 @@ class ChamberTracer:
         R = g.rim_radius
         fig = {}
         con, excl = tr["contrast"], tr["excluded"]
-        ds = np.concatenate(([0.0], np.diff(tr["stations"])))
+        st = tr["stations"]
+        ds = np.empty(len(st))  # station spacing, 0 for the first
+        ds[0] = 0.0
+        np.subtract(st[1:], st[:-1], out=ds[1:])
         dome = ~excl
         ref = tr["ref_contrast"]
         fig["dome_contrast"] = float(self._dome_median(tr) / ref) if dome.any() and ref > 0 else 0.0
@@ -1073,9 +1076,8 @@ class ChamberTracer:
             # the first pass's offsets from the predicted dome are the prediction error (after a global
             # trace unknown: the next frame tries tracking, its window's edges guard it)
             self._motion = tr["motion"] if tr["mode"] != "global" else 0.0
-            wd = tr["width"][tr["use"]]
-            wd = np.sort(np.abs(wd[np.isfinite(wd)]))
-            self._band = float(sorted_quantile(wd, 0.9)) if wd.size else np.nan
+            wd = tr["width"]
+            self._band = float(abs_percentile(wd, tr["use"] & np.isfinite(wd), 90.0))  # nan when none
             self._tracking = True
         return out
 

@@ -496,6 +496,69 @@ def test_abs_percentile_equals_numpy():
     assert np.isnan(abs_percentile(np.ones(3), np.zeros(3, bool), 90.0))
 
 
+def test_masked_nanmedian_equals_numpy():
+    from osmobulge.imaging._kernels import masked_nanmedian
+
+    rng = np.random.default_rng(1)
+    for n in (1, 2, 7, 400):
+        x = rng.normal(0, 3, n)
+        x[rng.random(n) < 0.2] = np.nan
+        ex = rng.random(n) < 0.3
+        sel = x[~ex]
+        want = np.nanmedian(sel) if np.isfinite(sel).any() else np.nan
+        assert masked_nanmedian(x, ex) == pytest.approx(want, rel=0, abs=0, nan_ok=True)
+    assert np.isnan(masked_nanmedian(np.ones(3), np.ones(3, bool)))
+
+
+@pytest.mark.parametrize("reverse", [False, True])
+def test_rim_guide_equals_numpy_selection(reverse):
+    """The guide from rim to rim: points outside the rim zones, left to right, between the rim points."""
+    from osmobulge.imaging._kernels import rim_guide
+
+    R, zc, near = 100.0, 23.0, 14.0
+    th = np.linspace(np.pi + 0.3, -0.3, 90)  # reaches beyond both rims, down into the rim zones
+    gu = np.c_[1.1 * R * np.cos(th), 80.0 * np.sin(th) + 5.0]
+    if reverse:
+        gu = gu[::-1].copy()
+    u, z = gu[:, 0], gu[:, 1]
+    excl = ((np.abs(u) > R - 1.0) & (z < zc)) | (np.hypot(np.abs(u) - R, z) < near)
+    assert 0 < excl.sum() < len(gu) - 3
+    kept = gu[~excl]
+    if kept[0, 0] > kept[-1, 0]:
+        kept = kept[::-1]
+    want = np.concatenate([[[-R, 0.0]], kept, [[R, 0.0]]])
+    ok, got = rim_guide(gu, R, zc, near)
+    assert ok
+    np.testing.assert_array_equal(got, want)
+    ok, got = rim_guide(gu[excl], R, zc, near)  # nothing outside the zones: the caller's straight guide
+    assert not ok and got.shape == (0, 2)
+
+
+def test_cubic_table_fit_equals_the_point_by_point_sums():
+    """A fit and its residuals from one table of spans and B-splines: the same bits as point by point."""
+    from osmobulge.imaging._kernels import _bspl_eval, _cubic_table, _eval_table, _lsq_normal, _lsq_normal_table
+
+    rng = np.random.default_rng(3)
+    x = np.sort(rng.uniform(0, 10, 300))
+    x[[0, -1]] = 0.0, 10.0
+    y = np.c_[np.sin(x), np.cos(x)] + rng.normal(0, 0.1, (300, 2))
+    w = np.where(rng.random(300) < 0.2, 0.0, rng.uniform(0.5, 2, 300))
+    t = np.r_[[0.0] * 4, np.sort(rng.uniform(0.5, 9.5, 20)), [10.0] * 4]
+    n = len(t) - 4
+    a1, b1 = np.zeros((n, 4)), np.zeros((n, 2))
+    a2, b2 = np.zeros((n, 4)), np.zeros((n, 2))
+    _lsq_normal(x, y, t, w, a1, b1)
+    spans, B = _cubic_table(t, x)
+    _lsq_normal_table(spans, B, y, w, a2, b2)
+    np.testing.assert_array_equal(a2, a1)
+    np.testing.assert_array_equal(b2, b1)
+    c = rng.normal(size=(n, 2))
+    e1, e2 = np.empty((300, 2)), np.empty((300, 2))
+    _bspl_eval(t, c, 3, x, e1)
+    _eval_table(spans, B, c, e2)
+    np.testing.assert_array_equal(e2, e1)
+
+
 def test_extrapolated_curve_equals_numpy():
     """The tracker's prediction: the last dome moved on as it moved since the one before (equal arc fractions)."""
     from osmobulge.imaging._kernels import extrapolated_curve
@@ -766,7 +829,8 @@ def test_ridge_rows_equals_numpy_reference(shape):
     np.testing.assert_array_equal(got[1], want[1])
 
 
-@pytest.mark.parametrize(("dtype", "f"), [(np.uint16, 4), (np.uint8, 3), (np.float64, 1), (bool, 2)])
+@pytest.mark.parametrize(("dtype", "f"), [(np.uint16, 4), (np.uint16, 2), (np.uint8, 3), (np.float64, 1), (bool, 2),
+                                         (np.float32, 4), (np.float32, 2), (np.int32, 5)])
 def test_block_mean_equals_numpy(dtype, f):
     from osmobulge.imaging._chamber import _coarse
 
@@ -781,6 +845,11 @@ def test_block_mean_equals_numpy(dtype, f):
         got = _coarse(a, f)
         assert got.dtype == np.float32 and got.shape == want(a).shape
         np.testing.assert_allclose(got, want(a), rtol=1e-6)
+        # the sums in float64 (exact here), times 1 / f^2, rounded once to float32: the unrolled f = 2 and 4
+        # loops give the same bits as the general one
+        h2, w2 = a.shape[0] // f * f, a.shape[1] // f * f
+        sums = np.asarray(a[:h2, :w2], np.float64).reshape(h2 // f, f, w2 // f, f).sum(axis=(1, 3))
+        np.testing.assert_array_equal(got, (sums * (1.0 / (f * f))).astype(np.float32))
 
 
 def test_compiled_on_disk_sees_a_missing_cache(monkeypatch, tmp_path):
