@@ -25,7 +25,10 @@ per machine) and cached on disk (``cache=True``).
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from llvmlite import ir
+from numba import njit, types
+from numba.core import cgutils
+from numba.extending import intrinsic
 
 __all__ = ["sample_transects", "ends_noise", "band_edges_rows", "step_crossing_rows", "robust_line", "line_band",
            "viterbi_rows", "lsq_spline", "fill_rows_nanmedian", "nanmedian", "longest_run", "running_percentile",
@@ -36,6 +39,30 @@ __all__ = ["sample_transects", "ends_noise", "band_edges_rows", "step_crossing_r
            "ellipse_scatter", "conic_parameters", "direct_ellipse", "ellipse_arc_volume", "profile_ellipse",
            "arc_resample", "dusty_rows", "wall_rows", "locate_walls", "ridge_rows", "block_mean", "signed_profiles",
            "compiled_on_disk"]
+
+
+@intrinsic
+def _prefetch(typingctx, arr, idx):
+    """Hint the CPU to fetch ``arr[idx]`` (1-D, in bounds) into its caches (``llvm.prefetch``: read, keep)."""
+    sig = types.void(arr, idx)
+
+    def codegen(context, builder, signature, args):
+        aryty = signature.args[0]
+        ary = context.make_array(aryty)(context, builder, args[0])
+        ptr = cgutils.get_item_pointer(context, builder, aryty, ary, [args[1]], wraparound=False)
+        i8p = ir.IntType(8).as_pointer()
+        i32 = ir.IntType(32)
+        fn = cgutils.get_or_insert_function(builder.module, ir.FunctionType(ir.VoidType(), [i8p, i32, i32, i32]),
+                                            "llvm.prefetch.p0i8")
+        builder.call(fn, [builder.bitcast(ptr, i8p), i32(0), i32(3), i32(1)])
+        return context.get_dummy_value()
+
+    return sig, codegen
+
+
+#: transects ahead whose pixels are prefetched while one is sampled: a new frame is not in the CPU's caches, and
+#: a transect's rows are too far apart for the hardware prefetcher (a dome's cold sampling 0.17 -> 0.10 ms)
+PREFETCH_AHEAD = 4
 
 
 @njit(cache=True, nogil=True)
@@ -51,8 +78,12 @@ def _sample_transects(frame, k, px, py, dx, dy, offsets, out):
             finite = False
         omin = min(omin, offsets[j])
         omax = max(omax, offsets[j])
+    span = omax - omin
+    # the view's rotation as a linear map: stored (row, col) = start + offset * (drow, dcol); a transect whose
+    # ends lie inside the last pixel square needs no bounds checks (most of them)
+    rs_a, cs_a, dr_a, dc_a = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
+    inside = np.empty(n, np.bool_)
     for i in range(n):
-        # the view's rotation as a linear map: stored (row, col) = start + offset * (drow, dcol)
         if k == 0:
             rs, cs, dr, dc = py[i], px[i], dy[i], dx[i]
         elif k == 1:
@@ -61,10 +92,24 @@ def _sample_transects(frame, k, px, py, dx, dy, offsets, out):
             rs, cs, dr, dc = hm - py[i], wm - px[i], -dy[i], -dx[i]
         else:
             rs, cs, dr, dc = hm - px[i], py[i], -dx[i], dy[i]
-        # a transect whose ends lie inside the last pixel square needs no bounds checks (most of them)
+        rs_a[i], cs_a[i], dr_a[i], dc_a[i] = rs, cs, dr, dc
         r_lo, r_hi = min(rs + omin * dr, rs + omax * dr), max(rs + omin * dr, rs + omax * dr)
         c_lo, c_hi = min(cs + omin * dc, cs + omax * dc), max(cs + omin * dc, cs + omax * dc)
-        if finite and h > 1 and w > 1 and r_lo >= 1e-6 and c_lo >= 1e-6 and r_hi < hm - 1e-6 and c_hi < wm - 1e-6:
+        inside[i] = (finite and h > 1 and w > 1 and r_lo >= 1e-6 and c_lo >= 1e-6 and r_hi < hm - 1e-6
+                     and c_hi < wm - 1e-6)
+    for i in range(n):
+        ia = i + PREFETCH_AHEAD
+        if ia < n and inside[ia]:
+            # points along the transect close enough that their two rows (a bilinear sample's) and their
+            # cache lines (32 px of 16 bits) cover every pixel it samples
+            n_pf = int(max(abs(dr_a[ia]) * span / 1.5, abs(dc_a[ia]) * span / 24.0)) + 2
+            for q in range(n_pf):
+                o = omin + span * q / (n_pf - 1)
+                b0 = int(rs_a[ia] + o * dr_a[ia]) * w + int(cs_a[ia] + o * dc_a[ia])
+                _prefetch(flat, b0)
+                _prefetch(flat, b0 + w)
+        rs, cs, dr, dc = rs_a[i], cs_a[i], dr_a[i], dc_a[i]
+        if inside[i]:
             for j in range(m):
                 r = rs + offsets[j] * dr
                 c = cs + offsets[j] * dc
@@ -1692,11 +1737,18 @@ def abs_percentile(x, mask, q):
         if mask[i]:
             v[j] = abs(x[i])
             j += 1
-    v.sort()
     pos = q / 100.0 * (n - 1)
     lo = int(np.floor(pos))
-    hi = min(lo + 1, n - 1)
-    return v[lo] + (pos - lo) * (v[hi] - v[lo])
+    # the two order statistics the interpolation needs, by selection (as the sorted array's v[lo], v[lo + 1])
+    v = np.partition(v, lo)
+    v_lo = v[lo]
+    v_hi = v_lo
+    if lo + 1 < n:
+        v_hi = v[lo + 1]
+        for i in range(lo + 2, n):
+            if v[i] < v_hi:
+                v_hi = v[i]
+    return v_lo + (pos - lo) * (v_hi - v_lo)
 
 
 @njit(cache=True, nogil=True)

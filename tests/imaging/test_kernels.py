@@ -485,6 +485,7 @@ def test_final_fit_falls_back_to_scipy_when_the_kernel_cannot_solve(monkeypatch)
 
 def test_abs_percentile_equals_numpy():
     from osmobulge.imaging._kernels import abs_percentile
+    from osmobulge.imaging.geometry import sorted_quantile
 
     rng = np.random.default_rng(0)
     for n in (1, 2, 7, 400):
@@ -493,6 +494,10 @@ def test_abs_percentile_equals_numpy():
         m[0] = True
         for q in (0.0, 50.0, 90.0, 100.0):
             assert abs_percentile(x, m, q) == pytest.approx(np.percentile(np.abs(x[m]), q), rel=1e-12, abs=1e-15)
+            # bit for bit the tracer's former band percentile (sorted, then the project's linear quantile)
+            assert abs_percentile(x, m, q) == sorted_quantile(np.sort(np.abs(x[m])), q / 100.0)
+        x[:5] = x[0]  # ties
+        assert abs_percentile(x, m, 90.0) == sorted_quantile(np.sort(np.abs(x[m])), 0.9)
     assert np.isnan(abs_percentile(np.ones(3), np.zeros(3, bool), 90.0))
 
 
