@@ -353,8 +353,7 @@ class ChamberTracer:
     @staticmethod
     def _highpass(patch):
         """2x block mean minus a smooth background (removes uneven illumination)."""
-        h, w = patch.shape[0] // 2 * 2, patch.shape[1] // 2 * 2
-        p = patch[:h, :w].reshape(h // 2, 2, w // 2, 2).mean(axis=(1, 3))
+        p = block_mean(np.ascontiguousarray(patch, np.float32), 2)
         return p - ndi.uniform_filter(p, 9, mode="nearest")
 
     def _coarse_line(self, view, line):
@@ -489,11 +488,10 @@ class ChamberTracer:
         corners = np.array([g.line.point(u, z) for u in (-umax, umax) for z in (-g.thickness, zmax)])
         c0, r0 = np.floor(corners.min(axis=0)).astype(int)
         c1, r1 = np.ceil(corners.max(axis=0)).astype(int) + 1
-        patch, (pr0, pc0) = view.patch(r0, r1, c0, c1)
-        hh, ww = patch.shape[0] // f * f, patch.shape[1] // f * f
+        coarse, (pr0, pc0) = view.block_mean(r0, r1, c0, c1, f)  # f x f block means of the patch (compiled)
+        hh, ww = coarse.shape[0] * f, coarse.shape[1] * f
         if hh < 4 * f or ww < 4 * f:
             return None
-        coarse = block_mean(patch, f)  # f x f block means (compiled)
         bg = ndi.gaussian_filter(coarse, 8.0, mode="nearest")
         con = g.polarity * (bg - coarse) / np.maximum(np.abs(bg), 1e-9)
         if np.isfinite(g.contrast):
@@ -503,12 +501,13 @@ class ChamberTracer:
         c = np.clip(con / max(ref, 1e-9), 0.0, 1.0)
         cost = 1.0 / (0.04 + c) ** 2
         # coarse pixel centres in view coordinates -> chamber (u, z)
-        yy, xx = np.mgrid[0 : hh // f, 0 : ww // f]
-        vx = pc0 + f * xx + (f - 1) / 2.0
-        vy = pr0 + f * yy + (f - 1) / 2.0
-        u, z = g.line.coords(np.stack([vx.ravel(), vy.ravel()], axis=1))
-        u = u.reshape(vx.shape)
-        z = z.reshape(vx.shape)
+        nr, nc = coarse.shape
+        pts = np.empty((nr, nc, 2))
+        pts[..., 0] = pc0 + f * np.arange(nc) + (f - 1) / 2.0
+        pts[..., 1] = (pr0 + f * np.arange(nr) + (f - 1) / 2.0)[:, None]
+        u, z = g.line.coords(pts.reshape(-1, 2))
+        u = u.reshape(nr, nc)
+        z = z.reshape(nr, nc)
         cost[z < -0.5 * f - 1.0] = 1e6  # never below the flat membrane (the well)
         cost[np.abs(u) > umax] = 1e6
 

@@ -857,6 +857,30 @@ def test_block_mean_equals_numpy(dtype, f):
         np.testing.assert_array_equal(got, (sums * (1.0 / (f * f))).astype(np.float32))
 
 
+@pytest.mark.parametrize("k", range(4))
+@pytest.mark.parametrize("dtype", [np.uint16, np.uint8, np.float64, np.int32])
+def test_view_block_mean_equals_block_mean_of_the_float32_patch(k, dtype):
+    """The global guide's block means straight from the frame: the same bits as through the float32 patch."""
+    from osmobulge.imaging._kernels import block_mean
+
+    rng = np.random.default_rng(k)
+    frame = (rng.random((90, 70)) * (250 if dtype == np.uint8 else 60000)).astype(dtype)
+    if dtype == np.float64:
+        frame += rng.random(frame.shape) / 3  # not exact in float32: the patch's rounding must stay
+    if dtype == np.int32:
+        frame *= 1000  # beyond float32's 24 bits
+    view = FrameView(frame, k)
+    for box in ((5, 61, 3, 50), (-4, 200, -9, 33), (0, view.shape[0], 0, view.shape[1])):
+        patch, origin = view.patch(*box)
+        got, got_origin = view.block_mean(*box, 4)
+        assert got_origin == origin
+        np.testing.assert_array_equal(got, block_mean(patch, 4))
+    if np.dtype(dtype).kind in "ui" and np.dtype(dtype).itemsize <= 2:
+        frame.flags.writeable = False  # a memory-mapped file's frame: the copy is writable, no new kernel type
+        np.testing.assert_array_equal(FrameView(frame, k).block_mean(0, 40, 0, 40, 2)[0],
+                                      block_mean(view.patch(0, 40, 0, 40)[0], 2))
+
+
 def test_compiled_on_disk_sees_a_missing_cache(monkeypatch, tmp_path):
     """The first-run progress note: True once the kernels are cached, False when an index file is missing."""
     from osmobulge.imaging import _kernels as K
