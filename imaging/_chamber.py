@@ -28,6 +28,7 @@ from osmobulge.imaging._kernels import (
     WALL_SIDE,
     band_edges_rows,
     block_mean,
+    column_nanmedian,
     dusty_rows,
     line_band,
     nanmedian,
@@ -331,6 +332,13 @@ def smoothed_coarse(frame):
     return ndi.gaussian_filter(_coarse(frame, f), 1.0)
 
 
+def _sobel_rows(img, r0, r1):
+    """``ndi.sobel(img, axis=1)[r0:r1]``, bit for bit, from rows ``r0 - 1 .. r1`` only (the 3 x 3 neighbourhood;
+    at the image's own edges the same reflection)."""
+    lo, hi = max(r0 - 1, 0), min(r1 + 1, img.shape[0])
+    return ndi.sobel(img[lo:hi], axis=1)[r0 - lo: r1 - lo]
+
+
 def detect_orientation(frame, *, coarse=None):
     """Bulge direction of a (flat-membrane) frame: the side of the straight membrane band away from the wells.
 
@@ -363,14 +371,18 @@ def detect_orientation(frame, *, coarse=None):
     h, w = v.shape
     cols = np.arange(w)
     line_rows = a + b * cols
-    gx = ndi.sobel(v, axis=1)
+    offs = np.arange(4, 4 + max(6, h // 24))
+    rows = {sign: np.clip(np.round(line_rows[None, :] + sign * offs[:, None]).astype(int), 0, h - 1)
+            for sign in (1, -1)}
+    # the horizontal gradient on the rows the strips use (not the whole image)
+    r0 = min(int(r.min()) for r in rows.values())
+    r1 = max(int(r.max()) for r in rows.values()) + 1
+    gx = _sobel_rows(v, r0, r1)
 
     def wall_score(sign):
         # median over a strip of rows beside the band of the horizontal gradient: walls are
         # vertical edges crossing the whole strip; dust is local and drops out of the median
-        offs = np.arange(4, 4 + max(6, h // 24))
-        rr = np.clip(np.round(line_rows[None, :] + sign * offs[:, None]).astype(int), 0, h - 1)
-        strip = gx[rr, cols[None, :]]
+        strip = gx[rows[sign] - r0, cols[None, :]]
         med = np.abs(np.median(strip, axis=0))
         return float(np.sort(med)[-max(4, w // 64):].mean())
 
@@ -652,8 +664,8 @@ def find_chambers(view, *, thickness=None, min_width=20, chamber=None, coarse=No
     zs_water = 0.5 * thickness + np.linspace(6.0, 6.0 + max(8.0, 1.5 * thickness), 7)
     pb = line.point(ucol[None, :], zs_base[:, None])
     pw = line.point(ucol[None, :], zs_water[:, None])
-    base = _nanmedian(view.sample(pb[..., 0], pb[..., 1]), axis=0)
-    water = _nanmedian(view.sample(pw[..., 0], pw[..., 1]), axis=0)
+    base = column_nanmedian(view.sample(pb[..., 0], pb[..., 1]))
+    water = column_nanmedian(view.sample(pw[..., 0], pw[..., 1]))
     with np.errstate(invalid="ignore", divide="ignore"):
         ratio = np.log(np.abs(base) + 1e-6) - np.log(np.abs(water) + 1e-6)
     ratio = ndi.median_filter(np.nan_to_num(ratio, nan=0.0), 5)

@@ -31,7 +31,8 @@ from numba.core import cgutils
 from numba.extending import intrinsic
 
 __all__ = ["sample_transects", "ends_noise", "band_edges_rows", "step_crossing_rows", "robust_line", "line_band",
-           "viterbi_rows", "lsq_spline", "fill_rows_nanmedian", "nanmedian", "longest_run", "running_percentile",
+           "viterbi_rows", "lsq_spline", "fill_rows_nanmedian", "nanmedian", "column_nanmedian", "longest_run",
+           "running_percentile",
            "low_contrast_run", "ellipse_distance_folded", "robust_profile_spline", "pass_tail", "strongest_edge",
            "native_frame", "guide_transects", "revolution_halves", "clean_stations", "track_pass", "rim_bridge",
            "rim_zone", "rim_guide", "masked_nanmedian", "abs_percentile", "extrapolated_curve", "rim_contact",
@@ -818,7 +819,7 @@ def running_percentile(x, q, size):
         return out
     half = size // 2
     rank = size - 1 if q == 100.0 else int(float(size) * q / 100.0)
-    order = np.argsort(x, kind="mergesort")
+    order = np.argsort(x)  # (ties in any order: the k-th smallest value of a window is the same)
     pos = np.empty(n, np.int64)  # 1-based rank of each sample
     for r in range(n):
         pos[order[r]] = r + 1
@@ -904,6 +905,23 @@ def fill_rows_nanmedian(q):
             if not np.isfinite(q[i, j]):
                 q[i, j] = fill
     return q
+
+
+@njit(cache=True, nogil=True)
+def column_nanmedian(a):
+    """``np.nanmedian(a, axis=0)`` of a 2-D array (nan for a column without a finite value)."""
+    n, m = a.shape
+    out = np.empty(m)
+    buf = np.empty(n)
+    srt = np.empty(n)
+    for j in range(m):
+        c = 0
+        for i in range(n):
+            if np.isfinite(a[i, j]):
+                buf[c] = a[i, j]
+                c += 1
+        out[j] = _median_small(buf, 0, c, srt) if c else np.nan
+    return out
 
 
 @njit(cache=True, nogil=True)

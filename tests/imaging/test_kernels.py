@@ -433,6 +433,21 @@ def test_nanmedian_equals_numpy():
     assert nanmedian(np.array([3, 1, 2], np.uint16)) == 2.0
 
 
+def test_column_nanmedian_equals_numpy():
+    from osmobulge.imaging._kernels import column_nanmedian
+
+    rng = np.random.default_rng(2)
+    for n in (1, 2, 7, 8):
+        a = rng.normal(size=(n, 300))
+        a[rng.random(a.shape) < 0.25] = np.nan  # odd and even counts per column, and empty columns
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            want = np.nanmedian(a, axis=0)
+        np.testing.assert_array_equal(column_nanmedian(a), want)
+    a = rng.normal(size=(7, 50))
+    np.testing.assert_array_equal(column_nanmedian(a), np.median(a, axis=0))
+
+
 def test_big_endian_frames_are_sampled_like_native_ones():
     """ImageJ writes big-endian TIFFs: the kernels take them (numba needs native byte order)."""
     rng = np.random.default_rng(5)
@@ -879,6 +894,17 @@ def test_view_block_mean_equals_block_mean_of_the_float32_patch(k, dtype):
         frame.flags.writeable = False  # a memory-mapped file's frame: the copy is writable, no new kernel type
         np.testing.assert_array_equal(FrameView(frame, k).block_mean(0, 40, 0, 40, 2)[0],
                                       block_mean(view.patch(0, 40, 0, 40)[0], 2))
+
+
+def test_sobel_rows_equal_the_whole_image_gradient():
+    """The orientation's wall score takes the gradient of the strips' rows only: the same bits."""
+    from osmobulge.imaging._chamber import _sobel_rows
+
+    img = np.random.default_rng(4).random((40, 33)).astype(np.float32)
+    for view in (img, np.rot90(img)):
+        full = ndi.sobel(view, axis=1)
+        for r0, r1 in ((0, 5), (3, 17), (10, view.shape[0]), (0, view.shape[0]), (view.shape[0] - 1, view.shape[0])):
+            np.testing.assert_array_equal(_sobel_rows(view, r0, r1), full[r0:r1])
 
 
 def test_compiled_on_disk_sees_a_missing_cache(monkeypatch, tmp_path):
