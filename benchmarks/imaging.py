@@ -23,7 +23,7 @@ Run with ``python benchmarks/imaging.py [--quick] [--frames 500]``.
    of 3), single core; once more with the file evicted from the page cache
    before each pass (``posix_fadvise``), and for folders of TIFF and PNG
    files.  The first call in a process, which loads the numba kernels from
-   their disk cache (compiling them takes about 40 s once on a new machine),
+   their disk cache (compiling them takes about 45 s once on a new machine),
    is timed apart (on a 3-frame TIFF: a memory-mapped file's frames are
    read-only arrays, whose kernels are loaded apart), and so is how each
    frame was traced (``track``:

@@ -18,7 +18,7 @@ does (named in its docstring, and checked against it in
 ``tests/imaging/test_kernels.py``, or ``test_geometry.py`` for the ellipse;
 ``dusty_rows`` was written compiled and has its own tests in
 ``test_wall_dust.py``) without the temporary arrays and the per-call overhead
-that dominate a frame's tracing time.  Compiled on first use (about 40 s once
+that dominate a frame's tracing time.  Compiled on first use (about 45 s once
 per machine) and cached on disk (``cache=True``).
 """
 

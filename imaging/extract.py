@@ -311,7 +311,7 @@ def extract(
         from rich.progress import Progress
 
         bar = Progress(transient=True)
-        first_note = "" if compiled_on_disk() else " (first run on this machine: compiling the tracer, about 40 s)"
+        first_note = "" if compiled_on_disk() else " (first run on this machine: compiling the tracer, about 45 s)"
         task = bar.add_task("extracting" + first_note, total=n)
         bar.start()
     read = getattr(src, "peek", src.__getitem__)  # no copy of a memory-mapped frame: its pages are read on use

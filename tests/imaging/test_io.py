@@ -304,6 +304,19 @@ def test_multichannel_needs_a_channel(tmp_path):
         assert s.pixel_size == pytest.approx(1e-6)
 
 
+def test_a_stack_of_four_saved_as_planar_colour_says_how_to_save_it(tmp_path):
+    """tifffile.imwrite of a (4, H, W) stack writes one planar RGBA page: the error names the fix."""
+    data = np.zeros((4, 16, 16), np.uint16)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # (tifffile may warn about the guessed photometric)
+        tifffile.imwrite(tmp_path / "four.tif", data)
+    with pytest.raises(ValueError, match="unsupported axes 'SYX'.*photometric='minisblack'"):
+        open_series(tmp_path / "four.tif", pixel_size=1e-6, frame_interval=1.0)
+    tifffile.imwrite(tmp_path / "four-grey.tif", data, photometric="minisblack")
+    with open_series(tmp_path / "four-grey.tif", pixel_size=1e-6, frame_interval=1.0) as s:
+        assert len(s) == 4
+
+
 # --------------------------------------------------------------------------------------
 # laziness
 # --------------------------------------------------------------------------------------
