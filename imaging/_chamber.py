@@ -103,11 +103,16 @@ class FrameView:
         """Bilinear samples at ``points[i] + offsets[j] * directions[i]`` (view px), shape (N, K); nan outside."""
         return sample_transects(self.frame, self.k, points, directions, offsets)
 
-    def patch(self, r0, r1, c0, c1, dtype=np.float32):
-        """Dense copy of view rows r0:r1, cols c0:c1 (clipped to the view)."""
+    def _sub(self, r0, r1, c0, c1):
+        """View rows r0:r1, cols c0:c1 clipped to the view (a view of the frame) and their origin."""
         h, w = self.shape
         r0, r1, c0, c1 = max(int(r0), 0), min(int(r1), h), max(int(c0), 0), min(int(c1), w)
-        return np.asarray(np.rot90(self.frame, self.k)[r0:r1, c0:c1], dtype), (r0, c0)
+        return np.rot90(self.frame, self.k)[r0:r1, c0:c1], (r0, c0)
+
+    def patch(self, r0, r1, c0, c1, dtype=np.float32):
+        """Dense copy of view rows r0:r1, cols c0:c1 (clipped to the view)."""
+        sub, origin = self._sub(r0, r1, c0, c1)
+        return np.asarray(sub, dtype), origin
 
     def block_mean(self, r0, r1, c0, c1, f):
         """``block_mean(patch(r0, r1, c0, c1)[0], f)`` and the patch origin, without the float32 copy.
@@ -117,10 +122,8 @@ class FrameView:
         pixel); others through the float32 patch.
         """
         if self.frame.dtype.kind in "bui" and self.frame.dtype.itemsize <= 2:
-            h, w = self.shape
-            r0, r1, c0, c1 = max(int(r0), 0), min(int(r1), h), max(int(c0), 0), min(int(c1), w)
-            sub = np.rot90(self.frame, self.k)[r0:r1, c0:c1]
-            return block_mean(native_frame(np.array(sub, order="C")), int(f)), (r0, c0)  # (a writable copy)
+            sub, origin = self._sub(r0, r1, c0, c1)
+            return block_mean(native_frame(np.array(sub, order="C")), int(f)), origin  # (a writable copy)
         patch, origin = self.patch(r0, r1, c0, c1)
         return block_mean(patch, int(f)), origin
 

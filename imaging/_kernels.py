@@ -331,39 +331,12 @@ def _basis(t, k, l, x, b, left, right):
 
 
 @njit(cache=True, nogil=True)
-def _lsq_normal(x, y, t, w, ata, aty):
-    """Banded normal equations of the cubic least-squares spline (weights multiply the residuals)."""
-    n = ata.shape[0]
-    nd = y.shape[1]
-    b = np.empty(4)
-    left = np.empty(4)
-    right = np.empty(4)
-    l, x_prev = 3, -np.inf
-    for i in range(x.shape[0]):
-        wi = w[i] * w[i]
-        if wi == 0.0:
-            continue
-        xi = x[i]
-        # span l with t[l] <= x < t[l+1], 3 <= l <= n - 1 (the last point in the last span), and the 4
-        # non-zero cubic B-splines N_{l-3..l}(x)
-        l = _next_span(t, 3, n, xi, l, x_prev)
-        x_prev = xi
-        _basis(t, 3, l, xi, b, left, right)
-        for a in range(4):
-            ia = l - 3 + a
-            for c in range(a, 4):
-                ata[ia, c - a] += wi * b[a] * b[c]
-            for d in range(nd):
-                aty[ia, d] += wi * b[a] * y[i, d]
-
-
-@njit(cache=True, nogil=True)
 def _cubic_table(t, x):
     """Spans and the 4 non-zero cubic B-splines at each x (sorted, inside the base interval): ``(spans, B)``.
 
-    What :func:`_lsq_normal` and :func:`_bspl_eval` compute point by point
-    (the same span walk and :func:`_basis`), once for both: a fit and its
-    residuals at the same points share them.
+    The same span walk and :func:`_basis` as :func:`_bspl_eval`, once for a
+    fit (:func:`_lsq_normal_table`) and its residuals at the same points
+    (:func:`_eval_table`).
     """
     nx = x.shape[0]
     n = t.shape[0] - 4
@@ -386,7 +359,8 @@ def _cubic_table(t, x):
 
 @njit(cache=True, nogil=True)
 def _lsq_normal_table(spans, B, y, w, ata, aty):
-    """:func:`_lsq_normal` from a :func:`_cubic_table` (the same sums in the same order)."""
+    """Banded normal equations of the cubic least-squares spline (weights multiply the residuals), accumulated
+    into ``ata`` (upper bands in columns) and ``aty`` from a :func:`_cubic_table` of the points."""
     nd = y.shape[1]
     for i in range(spans.shape[0]):
         wi = w[i] * w[i]
@@ -399,6 +373,13 @@ def _lsq_normal_table(spans, B, y, w, ata, aty):
                 ata[ia, c - a] += wi * B[i, a] * B[i, c]
             for d in range(nd):
                 aty[ia, d] += wi * B[i, a] * y[i, d]
+
+
+@njit(cache=True, nogil=True)
+def _lsq_normal(x, y, t, w, ata, aty):
+    """Banded normal equations of the cubic least-squares spline at parameters ``x`` (knots ``t``)."""
+    spans, B = _cubic_table(t, x)
+    _lsq_normal_table(spans, B, y, w, ata, aty)
 
 
 @njit(cache=True, nogil=True)
@@ -910,17 +891,9 @@ def fill_rows_nanmedian(q):
 @njit(cache=True, nogil=True)
 def column_nanmedian(a):
     """``np.nanmedian(a, axis=0)`` of a 2-D array (nan for a column without a finite value)."""
-    n, m = a.shape
-    out = np.empty(m)
-    buf = np.empty(n)
-    srt = np.empty(n)
-    for j in range(m):
-        c = 0
-        for i in range(n):
-            if np.isfinite(a[i, j]):
-                buf[c] = a[i, j]
-                c += 1
-        out[j] = _median_small(buf, 0, c, srt) if c else np.nan
+    out = np.empty(a.shape[1])
+    for j in range(a.shape[1]):
+        out[j] = _nanmedian_flat(np.ascontiguousarray(a[:, j]))
     return out
 
 
@@ -1479,19 +1452,7 @@ def rim_guide(guide, R, zc, near):
 @njit(cache=True, nogil=True)
 def masked_nanmedian(x, exclude):
     """``np.nanmedian(x[~exclude])`` (nan when no finite value is left)."""
-    n = 0
-    for i in range(x.shape[0]):
-        if not exclude[i] and np.isfinite(x[i]):
-            n += 1
-    if n == 0:
-        return np.nan
-    v = np.empty(n)
-    j = 0
-    for i in range(x.shape[0]):
-        if not exclude[i] and np.isfinite(x[i]):
-            v[j] = x[i]
-            j += 1
-    return np.median(v)
+    return _nanmedian_flat(x[~exclude])
 
 
 @njit(cache=True, nogil=True)

@@ -288,11 +288,11 @@ class _TiffBackend:
         spatial = [ax for ax in axes if ax in "YXS"]
         if spatial[:2] != ["Y", "X"]:
             hint = ""
-            if axes.endswith("SYX") and shape[axes.index("S")] in (3, 4):
+            n_s = shape[axes.index("S")] if "S" in axes else 0
+            if axes.endswith("SYX") and n_s in (3, 4):
                 # tifffile.imwrite of a (3 or 4, H, W) stack stores one planar RGB(A) page, not 3 or 4 frames
-                hint = (f" -- {shape[axes.index('S')]} planar colour samples in one page; a stack of "
-                        f"{shape[axes.index('S')]} frames saved with tifffile.imwrite needs "
-                        f"photometric='minisblack'")
+                hint = (f" -- {n_s} planar colour samples in one page; a stack of {n_s} frames saved with "
+                        f"tifffile.imwrite needs photometric='minisblack'")
             raise ValueError(f"{self.path}: unsupported axes {axes!r} (need ...YX or ...YXS){hint}")
         lead = [(ax, n) for ax, n in zip(axes, shape, strict=True) if ax not in "YXS"]
         pages = list(series.pages)

@@ -79,7 +79,6 @@ from osmobulge.imaging._kernels import (
     pass_tail,
     rim_contact,
     rim_guide,
-    rim_zone,
     robust_profile_spline,
     track_pass,
 )
@@ -604,19 +603,14 @@ class ChamberTracer:
         """Band width (px) the tracking window is sized from: the last good dome's, at most the flat band's."""
         return min(g.thickness, self._band) if np.isfinite(self._band) else g.thickness
 
-    def _exclusion(self, g, u, z):
-        """Points merged with the flat band (at or beyond the rims, or close to a rim point) are not trusted.
-
-        Within half a band thickness, 2 px and two blur sigmas of the rim point
-        the dome's band and the flat band's corner are one blob, also just
-        inside the rim: a station there is pulled off the dome and bends the
-        bridge to the rim.
-        """
-        return rim_zone(np.ascontiguousarray(u, np.float64), np.ascontiguousarray(z, np.float64),
-                        float(g.rim_radius), *self._exclusion_zone(g))
-
     def _exclusion_zone(self, g):
-        """Height below which the band beyond a rim is flat, and the radius of the corner blob at a rim point."""
+        """Height below which the band beyond a rim is flat, and the radius of the corner blob at a rim point.
+
+        Points there (``_kernels.rim_zone``) are merged with the flat band and not trusted: within half a
+        band thickness, 2 px and two blur sigmas of the rim point the dome's band and the flat band's
+        corner are one blob, also just inside the rim; a station there is pulled off the dome and bends
+        the bridge to the rim.
+        """
         return g.thickness + 3.0, 0.5 * g.thickness + 2.0 + 2.0 * self.blur  # half a band and the blur round the rim
 
     def trace_dome(self, view, g, guide=None, *, track=False):
@@ -880,10 +874,7 @@ class ChamberTracer:
         R = g.rim_radius
         fig = {}
         con, excl = tr["contrast"], tr["excluded"]
-        st = tr["stations"]
-        ds = np.empty(len(st))  # station spacing, 0 for the first
-        ds[0] = 0.0
-        np.subtract(st[1:], st[:-1], out=ds[1:])
+        ds = np.diff(tr["stations"], prepend=tr["stations"][0])  # station spacing, 0 for the first
         dome = ~excl
         ref = tr["ref_contrast"]
         fig["dome_contrast"] = float(self._dome_median(tr) / ref) if dome.any() and ref > 0 else 0.0
