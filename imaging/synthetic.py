@@ -372,6 +372,12 @@ class _Scene:
         phi = math.radians(_DIRECTION_ANGLE[scene.bulge_direction] + nuis.tilt)
         self.cos, self.sin = math.cos(phi), math.sin(phi)
 
+    def to_scene(self, cols, rows, drift=(0.0, 0.0)):
+        """Inverse of :meth:`to_pixels`: fractional (col, row) px -> scene (u, w) in m."""
+        x = (np.asarray(cols, float) - self.anchor[0] - drift[0]) * self.p
+        y = -(np.asarray(rows, float) - self.anchor[1] - drift[1]) * self.p
+        return x * self.cos + y * self.sin, -x * self.sin + y * self.cos
+
     def to_pixels(self, uw, drift=(0.0, 0.0)):
         """Scene (u, w) in m (w: height above the flat midline) -> (col, row) px."""
         uw = np.asarray(uw, float) / self.p
@@ -492,6 +498,23 @@ class _Scene:
             hit = np.flatnonzero(cov)
             flat[hit] += cov[hit] * (np.float32(lm) - flat[hit])
         return img
+
+    def render_optical(self, fr: _Frame, drift, optics, sigma):
+        """Bright-field image of the frame from its optics (:func:`optics.render_optical`)."""
+        from osmobulge.imaging.optics import render_optical
+
+        chambers = [(0.0, fr.r, fr.z, fr.t, fr.lam)] + [tuple(nb) for nb in fr.neighbours]
+        return render_optical(
+            self.shape,
+            lambda c, r: self.to_scene(c, r, drift),
+            chambers,
+            self.a,
+            self.h,
+            self.l0,
+            self.p,
+            optics,
+            blur_sigma=sigma,
+        )
 
 
 def _illumination(shape, nuis: Nuisances):
@@ -736,6 +759,7 @@ def render_series(
     seed=0,
     n_profile=401,
     n_truth=201,
+    optics=None,
 ) -> SyntheticSeries:
     r"""Render a time series of cross-section micrographs of a bulging chamber.
 
@@ -770,6 +794,13 @@ def render_series(
         Reference radii per half profile used to draw the dome.
     n_truth : int
         Arc-length samples of the saved truth profile.
+    optics : Optics or None
+        Render the bright-field appearance from refractive indices, apertures
+        and focus (:mod:`osmobulge.imaging.optics`) instead of painted grey
+        levels; ``scene``'s grey levels and ``contrast`` are then unused, the
+        other nuisances (blur, polarity, light, noise, bit depth, drift, tilt,
+        neighbours) apply.  Event frames (delaminated, fractured, touching)
+        are painted-only.
 
     Returns
     -------
@@ -816,6 +847,13 @@ def render_series(
     if not isinstance(nuis, Nuisances):
         raise TypeError(f"nuisances must be a Nuisances, got {type(nuis).__name__}")
     flags = _event_flags(n_t, nuis)
+    if optics is not None:
+        from osmobulge.imaging.optics import Optics
+
+        if not isinstance(optics, Optics):
+            raise TypeError(f"optics must be an Optics, got {type(optics).__name__}")
+        if nuis.delaminated_frames or nuis.fractured_frames or nuis.touching_frames:
+            raise ValueError("event frames (delaminated, fractured, touching) are rendered by the painted model only")
 
     ss = np.random.SeedSequence(int(seed))
     rng_drift, rng_dust, rng_event = (np.random.default_rng(s) for s in ss.spawn(3))
@@ -890,7 +928,10 @@ def render_series(
             flag=str(flags[i]),
             fracture_centre=float(fracture_centres[i]),
         )
-        img = sc.render(fr, drift[i], levels, nuis.blur_sigma)
+        if optics is None:
+            img = sc.render(fr, drift[i], levels, nuis.blur_sigma)
+        else:
+            img = sc.render_optical(fr, drift[i], optics, nuis.blur_sigma)
         rng_noise = np.random.default_rng(np.random.SeedSequence(int(seed), spawn_key=(7, i)))
         frames[i] = _finish(img, nuis, illum, dust, rng_noise)
 
@@ -914,6 +955,7 @@ def render_series(
         n_truth,
         nb,
         nb_v,
+        optics,
     )
     truth.attrs["dust_specks"] = specks.ravel() if specks.size else "none"
     if hasattr(chamber, "to_attrs"):  # a modeling Chamber: its loading too (Chamber.from_attrs round-trips)
@@ -952,7 +994,8 @@ def _touch(frames_idx, prof, k_near, off, nb_v, nb_prof, a, l0, material, lambda
 
 
 def _truth(
-    v, times, prof, sl, flags, drift, sc, a, h, l0, p, material, lambda_pre, nuis, scene, seed, n_truth, nb, nb_v
+    v, times, prof, sl, flags, drift, sc, a, h, l0, p, material, lambda_pre, nuis, scene, seed, n_truth, nb, nb_v,
+    optics=None,
 ):
     n_t = v.size
     pr, pz, pt, arc = _resample_halves(prof, a, n_truth)
@@ -1036,6 +1079,11 @@ def _truth(
     for k, val in asdict(scene).items():
         attrs[f"scene_{k}"] = "auto" if val is None else (np.asarray(val, float) if isinstance(val, tuple) else val)
     attrs.update(nuis.to_attrs())
+    if optics is not None:
+        attrs.update(optics.to_attrs())
+        attrs["appearance"] = "optics"
+    else:
+        attrs["appearance"] = "painted"
     ds = xr.Dataset(data, coords=coords, attrs=attrs)
     rows, cols = sc.shape
     outside = (mid_col < 0) | (mid_col > cols - 1) | (mid_row < 0) | (mid_row > rows - 1)

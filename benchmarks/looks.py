@@ -1,0 +1,65 @@
+"""Benchmark: the tracer on optics-rendered looks (issue 16), one row per look.
+
+Run with ``python benchmarks/looks.py [--frames 9] [--held-out-only]``.
+
+Each look (:mod:`osmobulge.imaging.looks`) renders the reference chamber
+(0.8 um/px unless the look says otherwise, 1024 x 1024, rim pre-stretch
+1 + 0.01 Vtilde) over Vtilde = 0 -> 4 with the flat frame first, and
+:func:`osmobulge.imaging.extract.extract` measures it.  Columns: worst volume
+error / tolerance over frames flagged ok (tolerance max(3 %, 0.5 px layer over
+the rim disc)), the fraction of frames within it, the median rim-radius bias
+(px), the worst lambda_pre error, frames flagged, and silent errors (frames
+flagged ok but outside the volume or 0.5 px rim tolerance).  ``HELD_OUT_LOOKS``
+are printed apart: they are measured, never tuned on.  A look where the chamber
+is not found prints the error instead.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+
+from osmobulge.imaging.extract import extract
+from osmobulge.imaging.looks import HELD_OUT_LOOKS, LOOKS, render_look, score
+from osmobulge.modeling import PreStretch
+
+PRE = PreStretch(0.01, 0.0)
+
+
+def row(name, vt):
+    t0 = time.perf_counter()
+    s = render_look(name, vt, lambda_pre=PRE)
+    t_render = time.perf_counter() - t0
+    try:
+        ds = extract(s.frames, pixel_size=s.truth.attrs["pixel_size"], chamber=tuple(
+            s.truth.attrs[k] for k in ("chamber_radius", "chamber_depth", "membrane_thickness")), progress=False, frame_interval=600.0)
+    except Exception as exc:  # noqa: BLE001 - the benchmark reports every failure as a row
+        return f"| {name:20s} | {type(exc).__name__}: {str(exc)[:90]} |"
+    sc = score(s.truth, ds)
+    return (f"| {name:20s} | {sc['worst_dv_tol']:8.2f} | {100 * sc['frac_volume_ok']:5.0f} % |"
+            f" {sc['median_rim_bias_px']:+6.2f} | {100 * sc['worst_lambda_err']:6.2f} % |"
+            f" {sc['n_flagged']:2d}/{len(vt):<2d} | {sc['n_silent']:2d} | {t_render / len(vt):5.1f} s |")
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--frames", type=int, default=9, help="frames from Vtilde 0 to 4")
+    ap.add_argument("--held-out-only", action="store_true")
+    args = ap.parse_args()
+    vt = np.linspace(0.0, 4.0, args.frames) ** 1.5 / 2.0
+    head = ("| look                 | worst dV/tol (ok) | V ok | rim bias px | worst dlambda | flagged | silent |"
+            " render/frame |\n|---|---|---|---|---|---|---|---|")
+    groups = [("held-out looks (never tuned on)", HELD_OUT_LOOKS)]
+    if not args.held_out_only:
+        groups.insert(0, ("presets", LOOKS))
+    for title, looks in groups:
+        print(f"\n## {title}: Vtilde {', '.join(f'{x:.2f}' for x in vt)}\n")
+        print(head)
+        for name in looks:
+            print(row(name, vt), flush=True)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,134 @@
+"""Named appearances ("looks") of a series, for testing the tracer against optics.
+
+Each look is a :class:`Look`: an :class:`~osmobulge.imaging.optics.Optics` (or
+``None`` for the painted band), the :class:`~osmobulge.imaging.synthetic.Nuisances`
+and the chamber and pixel size it is rendered with.  ``LOOKS`` are the presets
+the tracer may be developed on; ``HELD_OUT_LOOKS`` use other indices, halos,
+focus, seeds and chambers and must never be tuned on: they are only measured
+(``benchmarks/imaging.py --looks``).
+
+>>> from osmobulge.imaging.looks import render_look
+>>> series = render_look("edge_dark", [0.0, 1.0], shape=(400, 600))  # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+from osmobulge.imaging.optics import Optics
+from osmobulge.imaging.synthetic import REFERENCE_CHAMBER, Nuisances, SyntheticSeries, render_series
+
+__all__ = ["Look", "LOOKS", "HELD_OUT_LOOKS", "render_look"]
+
+
+@dataclass(frozen=True)
+class Look:
+    """One appearance: optics (None: painted band), nuisances, chamber (m) and pixel size (m)."""
+
+    optics: Optics | None
+    nuisances: Nuisances = field(default_factory=lambda: Nuisances(blur_sigma=0.5))
+    chamber: tuple = REFERENCE_CHAMBER
+    pixel_size: float = 0.8e-6
+    seed: int = 0
+    note: str = ""
+
+
+_N = Nuisances(blur_sigma=0.5, noise_sigma=0.01)
+
+LOOKS: dict[str, Look] = {
+    "painted_band": Look(None, Nuisances(blur_sigma=1.0, noise_sigma=0.01), note="today's painted dark band"),
+    "absorbing_band": Look(Optics(absorption_film=2e4), _N, note="dyed film: filled absorbing band"),
+    "edge_dark": Look(Optics(), _N, note="in focus: faces and walls as dark silhouettes"),
+    "edge_bright": Look(Optics(defocus=-12e-6, condenser_na=0.05), _N, note="defocused: bright fringe inside faces"),
+    "bright_band": Look(Optics(condenser_na=0.40, condenser_inner_na=0.30), _N, note="annular (dark-field) light"),
+    "halo": Look(Optics(halo_strength=0.6, halo_width=3e-6), _N, note="halos on faces and walls"),
+    "no_grey_step": Look(Optics(condenser_na=0.2), _N, note="well and base at one grey, wider condenser"),
+    "defocus": Look(Optics(defocus=15e-6), _N, note="focal plane 15 um off"),
+    "inverted": Look(Optics(), replace(_N, polarity=-1), note="inverted contrast"),
+    "film_10um": Look(Optics(), _N, chamber=(200e-6, 110e-6, 10e-6), note="10 um film"),
+    "film_26um": Look(Optics(), _N, chamber=(200e-6, 110e-6, 26e-6), note="26 um film"),
+    "coarse_2um": Look(Optics(), _N, pixel_size=2e-6, note="2 um pixels"),
+    "uneven_8bit": Look(
+        Optics(),
+        replace(_N, bit_depth=8, illumination_gradient=0.3, vignetting=0.2, noise_sigma=0.015),
+        note="8-bit, uneven light",
+    ),
+}
+
+HELD_OUT_LOOKS: dict[str, Look] = {
+    "ho_pdms143_defocus": Look(
+        Optics(n_elastomer=1.43, defocus=-8e-6, condenser_na=0.15), replace(_N, noise_sigma=0.02), seed=11
+    ),
+    "ho_halo_wide": Look(Optics(halo_strength=0.8, halo_width=5e-6, defocus=5e-6), _N, seed=12),
+    "ho_small_chamber": Look(Optics(objective_na=0.3), _N, chamber=(100e-6, 110e-6, 20e-6), seed=13),
+    "ho_turbid_base": Look(Optics(absorption_base=400.0, n_liquid=1.35), replace(_N, blur_sigma=1.2), seed=14),
+    "ho_inverted_defocus": Look(Optics(defocus=10e-6), replace(_N, polarity=-1, bit_depth=8), seed=15),
+}
+
+
+def render_look(name, vtilde, *, shape=(1024, 1024), **kwargs) -> SyntheticSeries:
+    """Render the series ``vtilde`` in the named look (from ``LOOKS`` or ``HELD_OUT_LOOKS``).
+
+    Keywords are passed to :func:`~osmobulge.imaging.synthetic.render_series` and
+    override the look's (e.g. ``times``, ``lambda_pre``, ``material``).
+    """
+    look = LOOKS.get(name) or HELD_OUT_LOOKS.get(name)
+    if look is None:
+        raise ValueError(f"unknown look {name!r}; choose from {sorted(LOOKS) + sorted(HELD_OUT_LOOKS)}")
+    args = dict(
+        chamber=look.chamber,
+        pixel_size=look.pixel_size,
+        nuisances=look.nuisances,
+        optics=look.optics,
+        seed=look.seed,
+        shape=shape,
+    )
+    args.update(kwargs)
+    series = render_series(vtilde, **args)
+    series.truth.attrs["look"] = name
+    return series
+
+
+def score(truth, ds) -> dict:
+    """Per-frame errors of an extraction against the truth of its rendered series.
+
+    Tolerances are issue 16's: a frame's volume is right within
+    ``max(3 %, a 0.5 px layer over the rim disc)``, its rim radius within 0.5 px.
+    A *silent error* is a frame flagged ``ok`` whose volume or rim radius is
+    outside those.
+
+    Returns
+    -------
+    dict
+        ``dv_tol`` (|dV| / tolerance per frame), ``rim_bias_px`` (signed, per frame),
+        ``lambda_err`` (relative, per frame), ``flagged`` (bool per frame),
+        ``silent`` (bool per frame) and the summary figures ``worst_dv_tol``
+        (over frames flagged ok), ``frac_volume_ok``, ``median_rim_bias_px``,
+        ``worst_lambda_err``, ``n_flagged``, ``n_silent``.
+    """
+    import numpy as np
+
+    p = float(truth.attrs["pixel_size"])
+    v_true = truth["volume"].values
+    r_true = truth["rim_radius"].values
+    tol = np.maximum(0.03 * np.abs(v_true), 0.5 * p * np.pi * r_true**2)
+    dv = np.abs(ds["volume"].values - v_true) / tol
+    bias = (ds["rim_radius"].values - r_true) / p
+    lam_err = ds["lambda_pre"].values / truth["lambda_pre"].values - 1.0
+    flagged = ds["flag"].values.astype(str) != "ok"
+    bad = ~(dv <= 1.0) | ~(np.abs(bias) <= 0.5)
+    silent = ~flagged & bad
+    okv = np.where(flagged, np.nan, dv)
+    return {
+        "dv_tol": dv,
+        "rim_bias_px": bias,
+        "lambda_err": lam_err,
+        "flagged": flagged,
+        "silent": silent,
+        "worst_dv_tol": float(np.nanmax(okv)) if np.any(~flagged) else float("nan"),
+        "frac_volume_ok": float(np.mean(dv <= 1.0)),
+        "median_rim_bias_px": float(np.nanmedian(bias)),
+        "worst_lambda_err": float(np.nanmax(np.abs(lam_err))),
+        "n_flagged": int(flagged.sum()),
+        "n_silent": int(silent.sum()),
+    }

@@ -1,0 +1,327 @@
+r"""Bright-field appearance of the device from geometry and refractive indices.
+
+The painted renderer (:mod:`osmobulge.imaging.synthetic` without ``optics``) fills
+the membrane with a dark grey.  A real PDMS film in water is not an absorber: it is
+seen because it bends light.  This module renders what a transmitted-light
+microscope sees of the device viewed from the side, in geometric optics:
+
+1. **Optical path.**  The device is a slab of elastomer of depth ``depth`` along
+   the viewing axis ``y`` with its top face at the film's top (``w = l0/2``).  The
+   well is a solid of revolution (radius ``a`` at its bottom, ``a lambda_pre`` at
+   its top, depth ``h``) filled with salt solution, and the dome is a shell of
+   revolution whose mid-surface is the model profile and whose faces lie
+   ``+-l/2`` from it along the normal.  A ray parallel to ``y`` at scene position
+   ``(u, w)`` crosses each solid of revolution of radius ``R(w)`` along the chord
+   ``C = 2 sqrt(R^2 - u^2)``, so the optical path difference against water is
+
+   .. math::
+
+      \mathrm{OPD} = (n_e - n_w)\,[D - C_\mathrm{in}]_{w<l_0/2}
+                     + (n_s - n_w)\,C_\mathrm{in}
+                     + (n_e - n_w)\,[C_\mathrm{out} - C_\mathrm{in}]_{w \ge l_0/2}
+
+   with ``C_in`` the chord of the liquid (well, or dome interior) and ``C_out``
+   the chord of the dome's outer face.  The walls and the dome are therefore
+   *silhouettes*: the chord's slope diverges where the ray grazes a face.
+2. **Deflection and the objective's acceptance.**  A ray leaves with the
+   direction ``theta = grad OPD`` (thin-object limit).  Illumination fills the
+   condenser's cone (an annulus ``condenser_inner_na .. condenser_na``); the
+   fraction of it whose deflected direction still enters the objective
+   (``objective_na``) is the transmitted intensity ``T(|theta|)``, an exact
+   overlap of discs in direction space.  Rays bent beyond the aperture are lost:
+   faces and walls look dark, and with an annular condenser wider than the
+   objective (dark field) only bent light arrives and faces look bright.
+3. **Defocus.**  With the focal plane ``defocus`` (m) from the object, each ray is
+   imaged displaced by ``defocus * theta`` (its accepted part), so light bent at a
+   face piles up beside it: bright and dark fringes that swap sides through focus.
+   The condenser cone blurs the defocused image by ``|defocus| * condenser_na / 2``
+   (sigma) and diffraction by ``0.21 wavelength / objective_na``.
+4. **Absorption** (optional): Beer-Lambert along the chords, per medium; a dyed
+   film gives the "filled absorbing band" look, a slightly turbid base a grey step
+   between well and base.
+5. **Halo** (optional, phenomenological): the light that partially coherent
+   imaging diffracts out of a dark feature into a ring of width ``halo_width``
+   around it (``halo_strength`` of the lost light), as phase-contrast-like halos.
+
+The image is computed on an ``oversample``-times finer grid, splatted, blurred and
+block-averaged to pixels.  Pure numerics: arrays in, arrays out.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields
+
+import numpy as np
+from scipy import ndimage
+
+__all__ = ["Optics", "transmission", "optical_path", "render_optical"]
+
+
+@dataclass(frozen=True)
+class Optics:
+    """Optical set-up and media of a bright-field side view (SI units).
+
+    Parameters
+    ----------
+    n_water, n_elastomer, n_liquid : float
+        Refractive indices of the bath, the elastomer (base and film; PDMS
+        1.41-1.43) and the salt solution in the well (3 M NaCl ~ 1.36).
+    depth : float, m
+        Path length of the device slab along the viewing axis.
+    objective_na, condenser_na, condenser_inner_na : float
+        Objective acceptance and the condenser's illumination annulus
+        (``condenser_inner_na = 0``: a full cone).
+    defocus : float, m
+        Distance of the focal plane from the object (either sign).
+    wavelength : float, m
+        For the diffraction-limited blur.
+    absorption_film, absorption_base, absorption_liquid : float, 1/m
+        Beer-Lambert absorption coefficients.
+    halo_strength : float
+        Fraction (0 .. 1) of the light lost at dark features that reappears in
+        a halo around them.
+    halo_width : float, m
+        Gaussian radius of that halo.
+    brightness : float
+        Image level of undisturbed light (leaves room for bright fringes).
+    oversample : int
+        Sub-samples per pixel side.
+    """
+
+    n_water: float = 1.333
+    n_elastomer: float = 1.412
+    n_liquid: float = 1.362
+    depth: float = 1.0e-3
+    objective_na: float = 0.25
+    condenser_na: float = 0.10
+    condenser_inner_na: float = 0.0
+    defocus: float = 0.0
+    wavelength: float = 550e-9
+    absorption_film: float = 0.0
+    absorption_base: float = 0.0
+    absorption_liquid: float = 0.0
+    halo_strength: float = 0.0
+    halo_width: float = 3e-6
+    brightness: float = 0.7
+    oversample: int = 3
+
+    def __post_init__(self):
+        for name in ("n_water", "n_elastomer", "n_liquid"):
+            v = getattr(self, name)
+            if not (isinstance(v, int | float) and 1.0 <= v <= 3.0):
+                raise ValueError(f"{name} must be a refractive index in [1, 3], got {v!r}")
+        checks = {
+            "depth": (1e-6, 1.0),
+            "objective_na": (0.01, 1.5),
+            "condenser_na": (0.0, 1.5),
+            "condenser_inner_na": (0.0, 1.5),
+            "defocus": (-1e-3, 1e-3),
+            "wavelength": (1e-7, 2e-6),
+            "absorption_film": (0.0, 1e7),
+            "absorption_base": (0.0, 1e7),
+            "absorption_liquid": (0.0, 1e7),
+            "halo_strength": (0.0, 1.0),
+            "halo_width": (1e-8, 1e-3),
+            "brightness": (0.01, 1.0),
+        }
+        for name, (lo, hi) in checks.items():
+            v = getattr(self, name)
+            if not (isinstance(v, int | float) and math.isfinite(v) and lo <= v <= hi):
+                raise ValueError(f"{name} must be a number in [{lo}, {hi}] (SI units), got {v!r}")
+        if self.condenser_inner_na > self.condenser_na:
+            raise ValueError("condenser_inner_na must not exceed condenser_na")
+        if not (isinstance(self.oversample, int) and 1 <= self.oversample <= 8):
+            raise ValueError(f"oversample must be an int in [1, 8], got {self.oversample!r}")
+
+    def to_attrs(self) -> dict:
+        """netCDF-safe attrs (prefixed ``optics_``)."""
+        return {f"optics_{f.name}": getattr(self, f.name) for f in fields(self)}
+
+
+# --------------------------------------------------------------------------------------
+# transmission through the apertures
+# --------------------------------------------------------------------------------------
+def _disc_overlap(d, r1, r2):
+    """Area of the intersection of discs of radii r1, r2 whose centres are d apart."""
+    d = np.asarray(d, float)
+    out = np.zeros_like(d)
+    if r1 <= 0 or r2 <= 0:
+        return out
+    full = d <= abs(r1 - r2)
+    out[full] = math.pi * min(r1, r2) ** 2
+    part = (~full) & (d < r1 + r2)
+    dp = d[part]
+    a1 = r1**2 * np.arccos(np.clip((dp**2 + r1**2 - r2**2) / (2 * dp * r1), -1, 1))
+    a2 = r2**2 * np.arccos(np.clip((dp**2 + r2**2 - r1**2) / (2 * dp * r2), -1, 1))
+    a3 = 0.5 * np.sqrt(np.clip((-dp + r1 + r2) * (dp + r1 - r2) * (dp - r1 + r2) * (dp + r1 + r2), 0, None))
+    out[part] = a1 + a2 - a3
+    return out
+
+
+def transmission(theta, optics: Optics) -> np.ndarray:
+    """Fraction of the condenser's light, bent by ``theta`` (rad), that the objective accepts.
+
+    The illumination is uniform over the condenser annulus in direction space;
+    after bending by ``theta`` it is the same annulus centred on ``theta``, and the
+    accepted part is its overlap with the objective's disc.  A point source
+    (``condenser_na = 0``) is accepted while ``|theta| <= objective_na``.
+    """
+    th = np.abs(np.asarray(theta, float))
+    o, c, ci = optics.objective_na, optics.condenser_na, optics.condenser_inner_na
+    area = math.pi * (c * c - ci * ci)
+    if area <= 0:
+        return (th <= o).astype(float)
+    return (_disc_overlap(th, c, o) - _disc_overlap(th, ci, o)) / area
+
+
+# --------------------------------------------------------------------------------------
+# optical path of the scene
+# --------------------------------------------------------------------------------------
+def _chord(radius, u):
+    return 2.0 * np.sqrt(np.clip(radius * radius - u * u, 0.0, None))
+
+
+def _faces(r, z, t, a, l0):
+    """Inner and outer faces of a half dome (pole -> rim), each as radius(height) samples."""
+    mr, mz = a * np.asarray(r, float), a * np.asarray(z, float)
+    half = 0.5 * l0 * np.asarray(t, float)
+    dr, dz = np.gradient(mr), np.gradient(mz)
+    norm = np.hypot(dr, dz)
+    norm[norm == 0] = 1.0
+    # normal out of the dome: the tangent (pole -> rim) turned by +90 degrees; it points
+    # up at the pole, outwards at the equator and down over an overhang
+    nr, nz = -dz / norm, dr / norm
+    outer = (mr + half * nr, mz + half * nz)
+    inner = (mr - half * nr, mz - half * nz)
+    return inner, outer
+
+
+def _radius_of_height(face, w, floor, rim_radius):
+    """Radius R(w) of a face of revolution at heights w (0 where the face is absent).
+
+    Heights between ``floor`` and the face's foot take the rim radius (the face
+    meets the flat film there); above the face's top the solid is absent.
+    """
+    fr, fz = face
+    order = np.argsort(fz, kind="stable")
+    zz, rr = fz[order], fr[order]
+    rr = np.maximum(rr, 0.0)
+    top = zz[-1]
+    out = np.interp(w, zz, rr)
+    out = np.where(w < zz[0], rim_radius, out)
+    return np.where((w >= floor) & (w <= top), out, 0.0)
+
+
+def optical_path(u, w, chambers, a, h, l0, optics: Optics):
+    """OPD against water (m) and the path lengths in film, base and liquid at scene points.
+
+    Parameters
+    ----------
+    u, w : ndarray
+        Scene coordinates (m): along the rim line, and height above the flat
+        membrane's mid-surface.
+    chambers : list of (offset, r, z, thickness_ratio, lambda_pre)
+        Each chamber's axis offset (m) and half profile (``r, z`` in units of
+        ``a``, pole -> rim).
+
+    Returns
+    -------
+    opd, path_film, path_base, path_liquid : ndarray
+    """
+    ne, nw, ns = optics.n_elastomer, optics.n_water, optics.n_liquid
+    top = 0.5 * l0
+    in_slab = w < top
+    film_layer = in_slab & (w >= -top)
+    liquid = np.zeros_like(u)
+    shell = np.zeros_like(u)
+    for uc, r, z, t, lam in chambers:
+        x = u - uc
+        rim = a * lam
+        # the well: radius linear from a (bottom) to a lambda_pre (top face)
+        in_well = (w < -top) & (w >= -top - h)
+        rw = a + (rim - a) * (w + top + h) / h
+        liquid += np.where(in_well, _chord(rw, x), 0.0)
+        if np.max(z) * a <= 1e-3 * l0:  # flat membrane: no dome above the top face
+            continue
+        inner, outer = _faces(r, z, t, a, l0)
+        ri = _radius_of_height(inner, w, -top, rim)
+        ro = _radius_of_height(outer, w, top, rim)
+        ci = _chord(ri, x)
+        co = _chord(np.maximum(ro, ri), x)
+        liquid += np.where(w >= -top, ci, 0.0)
+        shell += np.where(w >= top, co - ci, 0.0)
+    base_path = np.where(in_slab, optics.depth - liquid, 0.0)
+    base_path = np.clip(base_path, 0.0, None)
+    film_path = shell + np.where(film_layer, base_path, 0.0)
+    base_only = np.where(film_layer, 0.0, base_path)
+    opd = (ne - nw) * (film_path + base_only) + (ns - nw) * liquid
+    return opd, film_path, base_only, liquid
+
+
+# --------------------------------------------------------------------------------------
+# the image
+# --------------------------------------------------------------------------------------
+def _splat(shape, rows, cols, weight):
+    """Bilinear splat of weights at fractional (row, col) positions onto a grid."""
+    r0 = np.floor(rows).astype(np.int64)
+    c0 = np.floor(cols).astype(np.int64)
+    fr, fc = rows - r0, cols - c0
+    out = np.zeros(shape[0] * shape[1])
+    for dr, dc, wgt in ((0, 0, (1 - fr) * (1 - fc)), (0, 1, (1 - fr) * fc), (1, 0, fr * (1 - fc)), (1, 1, fr * fc)):
+        rr, cc = r0 + dr, c0 + dc
+        ok = (rr >= 0) & (rr < shape[0]) & (cc >= 0) & (cc < shape[1])
+        out += np.bincount((rr[ok] * shape[1] + cc[ok]), weights=(weight * wgt)[ok], minlength=out.size)
+    return out.reshape(shape)
+
+
+def render_optical(shape, to_scene, chambers, a, h, l0, pixel_size, optics: Optics, blur_sigma=0.0):
+    """Noise-free bright-field image in [0, 1] (float32) of the scene.
+
+    Parameters
+    ----------
+    shape : (rows, cols)
+    to_scene : callable
+        ``(cols, rows) px -> (u, w) m`` for arrays of fractional pixel positions.
+    chambers : list of (offset, r, z, thickness_ratio, lambda_pre)
+    a, h, l0 : float, m
+    pixel_size : float, m
+    optics : Optics
+    blur_sigma : float, px
+        Extra Gaussian blur (camera, residual aberrations).
+    """
+    s = optics.oversample
+    rows, cols = shape
+    sub = (rows * s, cols * s)
+    q = pixel_size / s
+    rr, cc = np.mgrid[0 : sub[0], 0 : sub[1]].astype(float)
+    pr = (rr + 0.5) / s - 0.5  # sub-sample centres in pixel coordinates
+    pc = (cc + 0.5) / s - 0.5
+    u, w = to_scene(pc, pr)
+    opd, p_film, p_base, p_liq = optical_path(u, w, chambers, a, h, l0, optics)
+    g_row, g_col = np.gradient(opd, q)
+    theta = np.hypot(g_row, g_col)
+    light = transmission(theta, optics)
+    absorb = optics.absorption_film * p_film + optics.absorption_base * p_base + optics.absorption_liquid * p_liq
+    if np.any(absorb):
+        light = light * np.exp(-absorb)
+    if optics.defocus != 0.0:
+        # the accepted part of a bent bundle travels on at (at most) the aperture's angle
+        scale = np.minimum(theta, optics.objective_na) / np.maximum(theta, 1e-300)
+        shift = optics.defocus / q * scale
+        img = _splat(sub, rr + shift * g_row, cc + shift * g_col, light)
+    else:
+        img = light
+    sig = math.hypot(0.21 * optics.wavelength / optics.objective_na, 0.5 * abs(optics.defocus) * optics.condenser_na)
+    sig_sub = math.hypot(sig / q, blur_sigma * s)
+    if optics.halo_strength > 0:
+        # reference level: what an undisturbed region transmits
+        ref = float(transmission(0.0, optics))
+        lost = np.clip(ref - img, 0.0, None)
+        img = img + optics.halo_strength * ndimage.gaussian_filter(lost, optics.halo_width / q, mode="nearest")
+    img = ndimage.gaussian_filter(img, sig_sub, mode="nearest")
+    img = img.reshape(rows, s, cols, s).mean(axis=(1, 3))
+    norm = float(transmission(0.0, optics))
+    if norm < 0.05:  # dark field: scale by what a face at the aperture's edge sends
+        norm = float(np.max(transmission(np.linspace(0, 2, 401), optics)))
+    return np.clip(img * (optics.brightness / norm), 0.0, 1.0).astype(np.float32)

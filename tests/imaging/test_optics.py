@@ -1,0 +1,174 @@
+"""The optics renderer against independent truth: Monte Carlo apertures, sphere chords, silhouettes."""
+
+import math
+
+import numpy as np
+import pytest
+
+from osmobulge.imaging.looks import HELD_OUT_LOOKS, LOOKS, render_look, score
+from osmobulge.imaging.optics import Optics, _splat, optical_path, transmission
+from osmobulge.imaging.synthetic import Nuisances, render_series
+
+
+def _mc_transmission(theta, o):
+    """Monte Carlo: uniform directions in the condenser annulus, bent by theta, inside the objective."""
+    rng = np.random.default_rng(0)
+    n = 400_000
+    r = np.sqrt(rng.uniform(o.condenser_inner_na**2, o.condenser_na**2, n))
+    phi = rng.uniform(0, 2 * np.pi, n)
+    x, y = r * np.cos(phi) + theta, r * np.sin(phi)
+    return np.mean(np.hypot(x, y) <= o.objective_na)
+
+
+@pytest.mark.parametrize(
+    "optics",
+    [Optics(), Optics(condenser_na=0.2), Optics(condenser_na=0.4, condenser_inner_na=0.3), Optics(objective_na=0.1)],
+)
+@pytest.mark.parametrize("theta", [0.0, 0.1, 0.2, 0.3, 0.45])
+def test_transmission_matches_monte_carlo(optics, theta):
+    assert float(transmission(theta, optics)) == pytest.approx(_mc_transmission(theta, optics), abs=4e-3)
+
+
+def test_transmission_limits():
+    o = Optics(objective_na=0.25, condenser_na=0.1)
+    assert transmission(0.0, o) == pytest.approx(1.0)
+    assert transmission(0.149, o) == pytest.approx(1.0)  # inside NA_o - NA_c
+    assert transmission(0.351, o) == 0.0  # beyond NA_o + NA_c
+    point = Optics(condenser_na=0.0)
+    np.testing.assert_array_equal(transmission([0.2, 0.3], point), [1.0, 0.0])
+
+
+def _spherical_cap(rho, zc, n=2001):
+    """Half profile (pole -> rim) of a sphere of radius rho centred at height zc (units of a)."""
+    top = zc + rho
+    rim_angle = math.acos(-zc / rho)  # where the sphere meets z = 0 at r = 1 (rho^2 = 1 + zc^2)
+    ang = np.linspace(0.0, rim_angle, n)
+    return rho * np.sin(ang), zc + rho * np.cos(ang), top
+
+
+@pytest.mark.parametrize("zc", [-0.5, 0.0, 0.4])  # below, at and above the hemisphere
+def test_optical_path_of_a_spherical_shell_is_sphere_chords(zc):
+    a, h, l0 = 200e-6, 110e-6, 20e-6
+    o = Optics()
+    rho = math.sqrt(1 + zc * zc)
+    r, z, _ = _spherical_cap(rho, zc)
+    t = np.ones_like(r)  # uniform thickness: faces are concentric spheres of radius rho a +- l0/2
+    ro, ri = rho * a + 0.5 * l0, rho * a - 0.5 * l0
+    rng = np.random.default_rng(1)
+    # points above the top face, well inside the cap's height range
+    u = rng.uniform(-1.3 * rho * a, 1.3 * rho * a, 400)
+    w = rng.uniform(l0, (zc + rho) * a - l0, 400)
+    opd, film, _, liq = optical_path(u, w, [(0.0, r, z, t, 1.0)], a, h, l0, o)
+
+    def sphere_chord(rad):
+        return 2 * np.sqrt(np.clip(rad**2 - u**2 - (w - zc * a) ** 2, 0, None))
+
+    np.testing.assert_allclose(liq, sphere_chord(ri), atol=0.5e-6)
+    np.testing.assert_allclose(film, sphere_chord(ro) - sphere_chord(ri), atol=0.5e-6)
+    want = (o.n_elastomer - o.n_water) * film + (o.n_liquid - o.n_water) * liq
+    np.testing.assert_allclose(opd, want, rtol=1e-12)
+
+
+def test_optical_path_of_the_flat_device():
+    a, h, l0 = 200e-6, 110e-6, 20e-6
+    o = Optics(depth=1e-3)
+    r = np.linspace(0, 1, 50)
+    flat = [(0.0, r, np.zeros_like(r), np.ones_like(r), 1.0)]
+    u = np.array([0.0, 150e-6, 250e-6, 0.0, 0.0])
+    w = np.array([-l0 / 2 - h / 2, -l0 / 2 - h / 2, -l0 / 2 - h / 2, 0.0, l0])
+    opd, *_ = optical_path(u, w, flat, a, h, l0, o)
+    dp, ds = o.n_elastomer - o.n_water, o.n_elastomer - o.n_liquid
+    want = [dp * o.depth - ds * 2 * a, dp * o.depth - ds * 2 * math.sqrt(a * a - u[1] ** 2), dp * o.depth,
+            dp * o.depth, 0.0]
+    np.testing.assert_allclose(opd, want, rtol=1e-12, atol=1e-15)
+
+
+def test_splat_conserves_light():
+    rng = np.random.default_rng(2)
+    rows, cols = rng.uniform(0, 19, 1000), rng.uniform(0, 29, 1000)
+    wgt = rng.uniform(0, 1, 1000)
+    assert _splat((20, 30), rows, cols, wgt).sum() == pytest.approx(wgt.sum(), rel=1e-12)
+
+
+def _column_profile(series, i, col):
+    return series.frames[i][:, col].astype(float)
+
+
+@pytest.mark.parametrize("vt", [1.0, 3.0])
+def test_in_focus_dome_edge_is_the_outer_face(vt):
+    """The silhouette's outer edge (half level between water and the dark face) is the outer face at the pole."""
+    p = 1e-6
+    s = render_series([vt], pixel_size=p, shape=(700, 600), optics=Optics(),
+                      nuisances=Nuisances(blur_sigma=0.0, polarity=1))
+    tr = s.truth.isel(time=0)
+    col = int(round(float(tr.axis_x)))
+    prof = _column_profile(s, 0, col)
+    pole_row = float(tr.midline_row.values[0, 0])
+    outer_row = pole_row - 0.5 * float(tr.profile_thickness.values[0]) / p
+    bg = np.median(prof[: int(outer_row) - 20])
+    lo = prof[int(outer_row) - 2 : int(outer_row) + 6].min()
+    half = 0.5 * (bg + lo)
+    k = int(outer_row) - 8
+    while prof[k] > half:
+        k += 1
+    crossing = k - 1 + (prof[k - 1] - half) / (prof[k - 1] - prof[k])
+    assert abs(crossing - outer_row) < 0.6
+    assert lo < 0.3 * bg  # the silhouette is dark: its light is bent out of the objective
+
+
+def test_defocus_puts_bent_light_on_opposite_sides():
+    """Through focus the bright fringe beside the pole's face moves from one side to the other."""
+    p = 1e-6
+    res = {}
+    for d in (-12e-6, 12e-6):
+        s = render_series([2.0], pixel_size=p, shape=(700, 600), optics=Optics(defocus=d, condenser_na=0.05),
+                          nuisances=Nuisances(blur_sigma=0.0))
+        tr = s.truth.isel(time=0)
+        prof = _column_profile(s, 0, int(round(float(tr.axis_x))))
+        pole = float(tr.midline_row.values[0, 0])
+        bg = np.median(prof[: int(pole) - 40])
+        above = prof[int(pole) - 25 : int(pole) - 8].max() / bg  # outside the dome
+        below = prof[int(pole) + 8 : int(pole) + 25].max() / bg  # inside the dome
+        res[d] = (above, below)
+    (a_neg, b_neg), (a_pos, b_pos) = res[-12e-6], res[12e-6]
+    assert (b_neg > 1.05) != (b_pos > 1.05) or (a_neg > 1.05) != (a_pos > 1.05)
+
+
+def test_optics_rejects_bad_input():
+    with pytest.raises(ValueError, match="n_elastomer"):
+        Optics(n_elastomer=0.5)
+    with pytest.raises(ValueError, match="defocus"):
+        Optics(defocus=0.1)  # 10 cm: a unit slip (um given as m * 1e4)
+    with pytest.raises(ValueError, match="condenser_inner_na"):
+        Optics(condenser_na=0.1, condenser_inner_na=0.2)
+    with pytest.raises(TypeError, match="optics"):
+        render_series([0.0], optics={"defocus": 1e-6})
+    with pytest.raises(ValueError, match="painted"):
+        render_series([0.0, 1.0], optics=Optics(), nuisances=Nuisances(fractured_frames=(1,)))
+
+
+def test_looks_render_and_held_out_is_disjoint():
+    assert not set(LOOKS) & set(HELD_OUT_LOOKS)
+    required = {"absorbing_band", "edge_dark", "edge_bright", "bright_band", "halo", "no_grey_step", "defocus",
+                "inverted", "film_10um", "film_26um", "coarse_2um", "uneven_8bit"}
+    assert required <= set(LOOKS)
+    s = render_look("edge_dark", [0.0, 1.0], shape=(300, 400), pixel_size=2e-6)
+    assert s.truth.attrs["look"] == "edge_dark" and s.truth.attrs["appearance"] == "optics"
+    assert s.truth.attrs["optics_n_elastomer"] == pytest.approx(1.412)
+    with pytest.raises(ValueError, match="unknown look"):
+        render_look("nope", [0.0])
+
+
+def test_score_counts_silent_errors():
+    import xarray as xr
+
+    p = 1e-6
+    truth = xr.Dataset({"volume": ("time", [0.0, 1e-12]), "rim_radius": ("time", [200e-6, 201e-6]),
+                        "lambda_pre": ("time", [1.0, 1.005])}, attrs={"pixel_size": p})
+    tol0 = 0.5 * p * np.pi * (200e-6) ** 2
+    ds = xr.Dataset({"volume": ("time", [2 * tol0, 1e-12]), "rim_radius": ("time", [200e-6, 201.8e-6]),
+                     "lambda_pre": ("time", [1.0, 1.009]), "flag": ("time", ["ok", "poor_fit"])})
+    sc = score(truth, ds)
+    np.testing.assert_allclose(sc["dv_tol"], [2.0, 0.0], atol=1e-12)
+    np.testing.assert_allclose(sc["rim_bias_px"], [0.0, 0.8], atol=1e-9)
+    assert sc["n_silent"] == 1 and sc["n_flagged"] == 1 and sc["silent"].tolist() == [True, False]
