@@ -32,7 +32,7 @@ from osmobulge.imaging._kernels import arc_resample, compiled_on_disk, ellipse_a
 from osmobulge.imaging.geometry import fit_ellipse
 from osmobulge.imaging.trace import FLAGS, ChamberTracer, TraceSettings
 
-__all__ = ["extract", "stack_chambers", "save_extraction", "load_extraction", "ERRORS", "FLAGS"]
+__all__ = ["extract", "series_gates", "stack_chambers", "save_extraction", "load_extraction", "ERRORS", "FLAGS"]
 
 ERRORS = ("flag", "raise")
 _DIRECTIONS = ("auto", "up", "down", "left", "right")
@@ -279,7 +279,7 @@ def extract(
                                   f"membrane") from err
         raise ChamberNotFound(f"{err} -- the chamber is found in the first frame, which must show the flat membrane "
                          f"(a series that starts with the dome already grown, e.g. the second file of a split "
-                         f"series, needs reference_frame= a frame of the flat membrane)") from err
+                         f"series, needs reference_frame= a frame of the flat membrane){_LOOK_HINT}") from err
     if ref_frame is not None:  # the reference must be flat itself: traced once (by a copy of each tracer)
         import copy
 
@@ -339,6 +339,8 @@ def extract(
                         f"chamber {c}: " if len(runs) > 1 else "",
                         " (a series that starts bulged needs reference_frame= a frame of the flat membrane)")
 
+    for run in runs:
+        series_gates(run.scal, run.flag, run.flag_figure, p, flat_first=ref_frame is None)
     parts = [_dataset(r, times, p, chamber_attrs, src, settings, bulge_direction, chamber_region, errors, metadata,
                       fit_prestretch) for r in runs]
     for ds in parts:
@@ -348,6 +350,65 @@ def extract(
     if chamber_region != "all":
         return parts[0]
     return stack_chambers(parts, [f"chamber-{c}" for c in range(len(parts))])
+
+
+#: a frame's volume tolerance: this fraction of its volume, or this many px of layer over the rim disc
+GATE_VOLUME_FRACTION, GATE_LAYER_PX = 0.03, 0.5
+
+
+def series_gates(scal, flag, flag_figure, p, *, flat_first=True):
+    """Flag frames whose volume the rest of the series contradicts (in place).
+
+    Two checks over the frames still flagged ``ok``, each a ``poor_fit`` with its
+    figure (``flag_value``, in volume tolerances: ``max(3 %, a 0.5 px layer over
+    the rim disc)``):
+
+    * ``flat_volume``: the first frame, which must show the flat membrane, holds
+      a volume above its tolerance (the trace follows a face or a halo, not the
+      film, or the frame is not flat);
+    * ``volume_outlier``: a frame's volume lies more than its tolerance outside
+      the range of its nearest ok neighbours before and after.  A forward or
+      reverse actuation changes the volume monotonically, so a frame that is
+      not between its neighbours was traced on something else (a switched
+      face, a lost film).
+
+    Parameters
+    ----------
+    scal : dict of ndarray
+        Per-frame scalars with ``volume_left``, ``volume_right`` (m3),
+        ``rim_radius`` (m) and ``flag_value``.
+    flag, flag_figure : ndarray of str
+    p : float
+        Pixel size (m).
+    flat_first : bool
+        The first frame is the series' own flat reference (no ``reference_frame``).
+    """
+    vol = 0.5 * (scal["volume_left"] + scal["volume_right"])
+    rim = scal["rim_radius"]
+    tol = np.maximum(GATE_VOLUME_FRACTION * np.abs(vol), GATE_LAYER_PX * p * np.pi * rim**2)
+    ok = np.array([f == "ok" for f in flag]) & np.isfinite(vol) & np.isfinite(tol)
+    hits = {}
+    if flat_first and ok.size and ok[0] and abs(vol[0]) > tol[0]:
+        hits[0] = ("flat_volume", abs(vol[0]) / tol[0])
+    # worst offender first, then again without it: a frame that is off makes its neighbours look off too
+    keep = ok.copy()
+    while True:
+        idx = np.flatnonzero(keep)
+        if idx.size < 3:
+            break
+        mid, before, after = idx[1:-1], idx[:-2], idx[2:]
+        lo, hi = np.minimum(vol[before], vol[after]), np.maximum(vol[before], vol[after])
+        out = np.maximum(np.maximum(lo - vol[mid], vol[mid] - hi), 0.0)
+        # the neighbours' own tolerances count too: one of them may be the bad frame
+        excess = out / (tol[mid] + np.maximum(tol[before], tol[after]))
+        if not np.any(excess > 1.0):
+            break
+        j = int(np.argmax(np.where(excess > 1.0, out / tol[mid], -1.0)))  # the one furthest out in its own tolerance
+        i = int(mid[j])
+        hits.setdefault(i, ("volume_outlier", out[j] / tol[i]))
+        keep[i] = False
+    for i, (fig, val) in hits.items():
+        flag[i], flag_figure[i], scal["flag_value"][i] = "poor_fit", fig, val
 
 
 def _reference(reference_frame, first, p):
@@ -397,6 +458,13 @@ def _tracers(first, bulge_direction, chamber_region, settings):
 #: first-frame dome height, as a fraction of the rim radius, above which extract warns (the first frame
 #: must show the flat membrane; a first frame at Vtilde 0.05, height 0.1 a, still measures within 0.2 %)
 FIRST_FRAME_HEIGHT = 0.2
+#: what a failed chamber search adds: the looks the tracer cannot read yet, and the ways in
+_LOOK_HINT = (". The automatic search needs the well's liquid to differ in grey from the elastomer base and the "
+              "membrane to show as a filled band; a film seen only by its faces (bright field of a transparent "
+              "film), or well and base at one grey, is not found yet (osmobulge issue 16). Ways in: crop to one "
+              "chamber with chamber_region=(col0, col1) (bulge-up view) when several wells confuse the search, or "
+              "pick the profiles by hand in napari (python -m osmobulge.plugins EXPERIMENT, Profile picker)")
+
 #: the ``reference_frame`` attr of an extraction whose chamber was found in the source's own first frame
 OWN_FIRST_FRAME = "first frame"
 

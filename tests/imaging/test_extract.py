@@ -342,7 +342,8 @@ def test_a_first_frame_that_is_not_flat_is_an_error_or_a_warning():
     """The chamber is found in frame 0: a dome already grown there is said, never silently measured.
 
     Small chamber (a = 100 px in a 440 px field): from Vtilde 0.1 the band search fails (an error naming the
-    cause); at Vtilde 0.4 it succeeds with a wrong rim (a warning with the dome's height); at 0.05 all is well.
+    cause); at Vtilde 0.4 it succeeds with a wrong rim (a warning with the dome's height); at 0.05 the chamber is
+    found right and the first frame is flagged ``flat_volume``.
     """
     small = {"chamber": (100e-6, 50e-6, 10e-6), "shape": (420, 440), "pixel_size": 1e-6}
 
@@ -357,7 +358,10 @@ def test_a_first_frame_that_is_not_flat_is_an_error_or_a_warning():
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # no warning at all
         s, ds = run(0.05)
-    assert list(ds.flag.values) == ["ok"] * 3
+    # measured right, but a first frame must be flat: its dome (10 volume tolerances) is said by the series gate
+    assert list(ds.flag.values) == ["poor_fit", "ok", "ok"]
+    assert ds.flag_figure.values[0] == "flat_volume"
+    assert float(ds.flag_value[0]) == pytest.approx(0.05 * 100 / 0.5, rel=0.05)
     np.testing.assert_allclose(ds.volume, s.truth.volume, rtol=0.01)
     np.testing.assert_allclose(ds.rim_radius, s.truth.rim_radius, atol=0.5e-6)
 
