@@ -75,14 +75,14 @@ def render_look(name, vtilde, *, shape=(1024, 1024), **kwargs) -> SyntheticSerie
     look = LOOKS.get(name) or HELD_OUT_LOOKS.get(name)
     if look is None:
         raise ValueError(f"unknown look {name!r}; choose from {sorted(LOOKS) + sorted(HELD_OUT_LOOKS)}")
-    args = dict(
-        chamber=look.chamber,
-        pixel_size=look.pixel_size,
-        nuisances=look.nuisances,
-        optics=look.optics,
-        seed=look.seed,
-        shape=shape,
-    )
+    args = {
+        "chamber": look.chamber,
+        "pixel_size": look.pixel_size,
+        "nuisances": look.nuisances,
+        "optics": look.optics,
+        "seed": look.seed,
+        "shape": shape,
+    }
     args.update(kwargs)
     series = render_series(vtilde, **args)
     series.truth.attrs["look"] = name

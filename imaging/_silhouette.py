@@ -1,0 +1,164 @@
+"""Chamber walls from their silhouettes, without a grey step between well and base (issue 16).
+
+In bright field the well's liquid and the elastomer base both transmit: what
+shows a wall is the light its cylinder bends out of the objective, a dark (or,
+in dark field, bright) zone just *inside* the wall whose outer edge is the wall
+itself (:mod:`osmobulge.imaging.optics`).  This module finds, in a bulge-up
+frame of the flat membrane:
+
+* the top face of the device (the strongest straight line across the frame,
+  of either sign), and
+* each wall as the outer half-level edge of the strongest silhouette zones in
+  a strip of the base below the film, row by row, fitted by a line and read at
+  the base's top surface (``l0`` below the top face).
+
+It is look-agnostic (``|I - background|``), and not yet used by the tracer:
+tested on the optics looks against their true well radius.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import ndimage
+
+from osmobulge.imaging._chamber import ChamberNotFound
+
+__all__ = ["SilhouetteWalls", "find_walls"]
+
+#: largest row scatter (px) of a wall's silhouette edge about its line
+MAX_WALL_RMS = 0.5
+
+
+@dataclass(frozen=True)
+class SilhouetteWalls:
+    """Walls found by their silhouettes (px, stored frame, bulge-up).
+
+    ``top_row``: the device's top face; ``base_row``: the base's top surface
+    (``top_row + l0``); ``left``, ``right``: wall columns at ``base_row``;
+    ``rim_radius`` and ``axis_col``; ``rms``: the walls' row scatter about their lines.
+    """
+
+    top_row: float
+    base_row: float
+    left: float
+    right: float
+    rms: float
+
+    @property
+    def rim_radius(self) -> float:
+        return 0.5 * (self.right - self.left)
+
+    @property
+    def axis_col(self) -> float:
+        return 0.5 * (self.right + self.left)
+
+
+def _half_crossing(prof, peak, step):
+    """Sub-pixel index where ``prof`` falls to half its peak walking from ``peak`` by ``step`` (+-1)."""
+    half = 0.5 * prof[peak]
+    k = peak
+    while 0 <= k + step < prof.size and prof[k + step] > half:
+        k += step
+    j = k + step
+    if not (0 <= j < prof.size):
+        return np.nan
+    return k + step * (prof[k] - half) / (prof[k] - prof[j])
+
+
+def find_walls(frame, l0_px, *, strip=(0.15, 0.6), depth_px=None, min_width=40) -> SilhouetteWalls:
+    """Find the top face and the two walls of the central well in a flat, bulge-up frame.
+
+    Parameters
+    ----------
+    frame : ndarray of shape (M, N)
+        The flat first frame, dome side up.
+    l0_px : float
+        Membrane thickness in px (the base's top surface lies this far below
+        the top face).
+    strip : (float, float)
+        Rows of the base searched for walls, as fractions of ``depth_px``
+        below the base's top surface.
+    depth_px : float or None
+        Well depth in px (default: 100 px).
+    min_width : int
+        Narrowest well (px).
+
+    Raises
+    ------
+    ChamberNotFound
+        No straight top face, or fewer than two wall silhouettes.
+    """
+    img = np.asarray(frame, float)
+    if img.ndim != 2:
+        raise ValueError(f"frame must be 2-D, got shape {img.shape}")
+    if not (np.isfinite(l0_px) and l0_px > 0):
+        raise ValueError(f"l0_px must be > 0, got {l0_px!r}")
+    # relative deviation from the local light level (uneven illumination divides out)
+    bg = ndimage.gaussian_filter(img, 25.0, mode="nearest")
+    d = np.abs(img - bg) / np.maximum(bg, 1e-6 * max(float(bg.max()), 1e-30))
+    scale = np.percentile(d, 99.5)
+    if scale <= 1e-9:  # relative deviation: nothing but rounding
+        raise ChamberNotFound("the frame is uniform: no top face or walls to find")
+    d /= scale
+    # the top face: the row whose |deviation| is large across nearly the whole frame (its 15th
+    # percentile; the well's bottom face, as strong, spans only the well)
+    row_score = np.percentile(d, 15, axis=1)
+    top = int(np.argmax(row_score))
+    if row_score[top] < 0.02:
+        raise ChamberNotFound("no straight top face across the frame")
+    # its centre: half-level edges of the row score around the peak
+    lo_e = _half_crossing(row_score, top, -1)
+    hi_e = _half_crossing(row_score, top, +1)
+    top_row = 0.5 * (lo_e + hi_e) if np.isfinite(lo_e + hi_e) else float(top)
+    # a thick (absorbing) flat film: its top face is the band's upper edge
+    if hi_e - lo_e > 0.6 * l0_px:
+        top_row = lo_e
+    base_row = top_row + l0_px
+    depth = 100.0 if depth_px is None else float(depth_px)
+    r0 = int(np.ceil(base_row + strip[0] * depth))
+    r1 = int(np.floor(base_row + strip[1] * depth))
+    r1 = min(r1, img.shape[0] - 1)
+    if r1 - r0 < 5:
+        raise ChamberNotFound("too few base rows below the membrane to find the walls")
+    band = ndimage.uniform_filter1d(d[r0:r1], 3, axis=1)
+    col_score = np.median(band, axis=0)
+    # the two strongest silhouettes at least min_width apart, nearest the frame's centre first
+    peaks = []
+    order = np.argsort(col_score)[::-1]
+    for c in order[: max(50, img.shape[1] // 4)]:
+        if col_score[c] < 0.1:
+            break
+        if all(abs(c - p) > min_width for p in peaks):
+            peaks.append(int(c))
+        if len(peaks) == 2:
+            break
+    if len(peaks) < 2:
+        raise ChamberNotFound("fewer than two wall silhouettes in the base below the membrane")
+    cl, cr = sorted(peaks)
+    rows = np.arange(r0, r1)
+    left, right = [], []
+    for k in range(rows.size):
+        prof = ndimage.uniform_filter1d(d[rows[k]], 1)
+        # the wall's dark zone lies inside the well: its outer edge is the wall
+        pl = cl - 3 + int(np.argmax(prof[cl - 3 : cl + 4]))
+        pr = cr - 3 + int(np.argmax(prof[cr - 3 : cr + 4]))
+        left.append(_half_crossing(prof, pl, -1))
+        right.append(_half_crossing(prof, pr, +1))
+    left, right = np.asarray(left), np.asarray(right)
+    fits, res = [], []
+    for u in (left, right):
+        ok = np.isfinite(u)
+        if ok.sum() < 5:
+            raise ChamberNotFound("a wall's silhouette edge could not be followed down the base")
+        coef = np.polyfit(rows[ok], u[ok], 1)
+        r = u[ok] - np.polyval(coef, rows[ok])
+        keep = np.abs(r) <= max(3.0 * np.std(r), 0.3)
+        coef = np.polyfit(rows[ok][keep], u[ok][keep], 1)
+        fits.append(float(np.polyval(coef, base_row)))
+        res.append(float(np.sqrt(np.mean((u[ok][keep] - np.polyval(coef, rows[ok][keep])) ** 2))))
+    if max(res) > MAX_WALL_RMS:
+        raise ChamberNotFound(f"the wall silhouettes are not straight lines (row scatter {max(res):.2f} px > "
+                              f"{MAX_WALL_RMS} px): not walls, or a look this search cannot read")
+    return SilhouetteWalls(float(top_row), float(base_row), fits[0], fits[1], max(res))
