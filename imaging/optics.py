@@ -107,11 +107,10 @@ class Optics:
     oversample: int = 3
 
     def __post_init__(self):
-        for name in ("n_water", "n_elastomer", "n_liquid"):
-            v = getattr(self, name)
-            if not (isinstance(v, int | float) and 1.0 <= v <= 3.0):
-                raise ValueError(f"{name} must be a refractive index in [1, 3], got {v!r}")
         checks = {
+            "n_water": (1.0, 3.0),
+            "n_elastomer": (1.0, 3.0),
+            "n_liquid": (1.0, 3.0),
             "depth": (1e-6, 1.0),
             "objective_na": (0.01, 1.5),
             "condenser_na": (0.0, 1.5),
