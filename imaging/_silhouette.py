@@ -140,7 +140,7 @@ def find_walls(frame, l0_px, *, strip=(0.15, 0.6), depth_px=None, min_width=40) 
     rows = np.arange(r0, r1)
     left, right = [], []
     for k in range(rows.size):
-        prof = ndimage.uniform_filter1d(d[rows[k]], 1)
+        prof = d[rows[k]]
         # the wall's dark zone lies inside the well: its outer edge is the wall
         pl = cl - 3 + int(np.argmax(prof[cl - 3 : cl + 4]))
         pr = cr - 3 + int(np.argmax(prof[cr - 3 : cr + 4]))
