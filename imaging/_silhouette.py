@@ -67,7 +67,8 @@ def _half_crossing(prof, peak, step):
     return k + step * (prof[k] - half) / (prof[k] - prof[j])
 
 
-def find_walls(frame, l0_px, *, strip=(0.15, 0.6), depth_px=None, min_width=40) -> SilhouetteWalls:
+def find_walls(frame, l0_px, *, strip=(0.15, 0.6), depth_px=None, min_width=40, top_row=None,
+               near=None) -> SilhouetteWalls:
     """Find the top face and the two walls of the central well in a flat, bulge-up frame.
 
     Parameters
@@ -84,6 +85,12 @@ def find_walls(frame, l0_px, *, strip=(0.15, 0.6), depth_px=None, min_width=40) 
         Well depth in px (default: 100 px).
     min_width : int
         Narrowest well (px).
+    top_row : float, optional
+        The top face's row when already known (a later frame of a series,
+        registered against the first): not searched for.
+    near : (float, float), optional
+        Expected wall columns (left, right): the silhouettes are taken within
+        ``min_width / 2`` px of them instead of the two strongest.
 
     Raises
     ------
@@ -102,8 +109,33 @@ def find_walls(frame, l0_px, *, strip=(0.15, 0.6), depth_px=None, min_width=40) 
     if scale <= 1e-9:  # relative deviation: nothing but rounding
         raise ChamberNotFound("the frame is uniform: no top face or walls to find")
     d /= scale
-    # the top face: the row whose |deviation| is large across nearly the whole frame (its 15th
-    # percentile; the well's bottom face, as strong, spans only the well)
+    if top_row is None:
+        top_row = _top_face(d, l0_px)
+    base_row = top_row + l0_px
+    depth = 100.0 if depth_px is None else float(depth_px)
+    r0 = int(np.ceil(base_row + strip[0] * depth))
+    r1 = int(np.floor(base_row + strip[1] * depth))
+    r1 = min(r1, img.shape[0] - 1)
+    if r1 - r0 < 5:
+        raise ChamberNotFound("too few base rows below the membrane to find the walls")
+    band = ndimage.uniform_filter1d(d[r0:r1], 3, axis=1)
+    col_score = np.median(band, axis=0)
+    if near is not None:  # the silhouettes nearest the expected walls
+        half = max(min_width // 2, 3)
+        peaks = []
+        for c in near:
+            c0, c1 = max(int(round(c)) - half, 3), min(int(round(c)) + half + 1, img.shape[1] - 4)
+            if c1 - c0 < 3 or col_score[c0:c1].max() < 0.1:
+                raise ChamberNotFound(f"no wall silhouette within {half} px of column {c:.0f}")
+            peaks.append(c0 + int(np.argmax(col_score[c0:c1])))
+    else:
+        peaks = _strongest(col_score, img.shape[1], min_width)
+    return _fit_walls(d, peaks, r0, r1, top_row, base_row)
+
+
+def _top_face(d, l0_px):
+    """Row of the top face: the row whose |deviation| is large across nearly the whole frame."""
+    # (its 15th percentile; the well's bottom face, as strong, spans only the well)
     row_score = np.percentile(d, 15, axis=1)
     top = int(np.argmax(row_score))
     if row_score[top] < 0.02:
@@ -115,19 +147,14 @@ def find_walls(frame, l0_px, *, strip=(0.15, 0.6), depth_px=None, min_width=40) 
     # a thick (absorbing) flat film: its top face is the band's upper edge
     if hi_e - lo_e > 0.6 * l0_px:
         top_row = lo_e
-    base_row = top_row + l0_px
-    depth = 100.0 if depth_px is None else float(depth_px)
-    r0 = int(np.ceil(base_row + strip[0] * depth))
-    r1 = int(np.floor(base_row + strip[1] * depth))
-    r1 = min(r1, img.shape[0] - 1)
-    if r1 - r0 < 5:
-        raise ChamberNotFound("too few base rows below the membrane to find the walls")
-    band = ndimage.uniform_filter1d(d[r0:r1], 3, axis=1)
-    col_score = np.median(band, axis=0)
-    # the two strongest silhouettes at least min_width apart, nearest the frame's centre first
+    return float(top_row)
+
+
+def _strongest(col_score, width, min_width):
+    """The two strongest silhouette columns at least ``min_width`` apart."""
     peaks = []
     order = np.argsort(col_score)[::-1]
-    for c in order[: max(50, img.shape[1] // 4)]:
+    for c in order[: max(50, width // 4)]:
         if col_score[c] < 0.1:
             break
         if all(abs(c - p) > min_width for p in peaks):
@@ -136,6 +163,11 @@ def find_walls(frame, l0_px, *, strip=(0.15, 0.6), depth_px=None, min_width=40) 
             break
     if len(peaks) < 2:
         raise ChamberNotFound("fewer than two wall silhouettes in the base below the membrane")
+    return peaks
+
+
+def _fit_walls(d, peaks, r0, r1, top_row, base_row):
+    """Each wall's outer half-level edge row by row, fitted by a line and read at ``base_row``."""
     cl, cr = sorted(peaks)
     rows = np.arange(r0, r1)
     left, right = [], []

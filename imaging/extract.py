@@ -43,7 +43,13 @@ _FIGURES = {
     "gap_length": ("1", "longest run without membrane along the dome / membrane thickness"),
     "rim_contact": ("1", "membrane on the surface just outside the rims (1 = on it, 0 = lifted)"),
     "neighbour_gap": ("m", "gap between the dome and another (neighbour's) membrane"),
+    "edge_jumps": ("1", "silhouette route: fraction of rays whose outer-face edge jumped from its neighbours'"),
+    "edge_lost": ("1", "silhouette route: fraction of rays over the dome without an outer-face edge"),
 }
+
+#: how the chamber and dome are read: ``band`` (filled membrane band, grey step between well and base) or
+#: ``silhouette`` (faces and walls seen by the light they bend away, any look; imaging._facetrace)
+TRACERS = ("auto", "band", "silhouette")
 
 
 # ------------------------------------------------------------------------------------ sources
@@ -154,6 +160,7 @@ def extract(
     n_profile=201,
     fit_prestretch=True,
     reference_frame=None,
+    tracer="auto",
 ) -> xr.Dataset:
     r"""Extract bulge profiles, volumes, areas and rim radii from a micrograph series.
 
@@ -216,6 +223,20 @@ def extract(
         first frame is registered against it).  The rim radius and well depth
         of the reference (without ``chamber``) and the flat membrane's rim for
         :math:`\lambda_{pre}` come from it.
+    tracer : {"auto", "band", "silhouette"}
+        How the chamber and the dome are read.  ``"band"``: the membrane as a
+        filled band and the well by its grey step against the base
+        (:class:`~osmobulge.imaging.trace.ChamberTracer`).  ``"silhouette"``:
+        the film and the walls by the light their faces bend away, whatever
+        their look (edge-only faces of either sign, halos, defocus, well and
+        base at one grey; :mod:`osmobulge.imaging._facetrace`): the outer face
+        traced as the change since the flat first frame, the mid-surface half
+        the film's thickness inside it; one upright chamber (no
+        ``chamber_region``), thickness from ``chamber`` or measured from the
+        flat film's two faces.  ``"auto"``: the band route, and the
+        silhouette route when the band route finds no chamber or cannot read
+        its own (flat) first frame.  The route
+        taken is the ``tracer`` attr.
 
     Returns
     -------
@@ -247,6 +268,11 @@ def extract(
         raise ValueError(f"errors must be one of {ERRORS}, got {errors!r}")
     if bulge_direction not in _DIRECTIONS:
         raise ValueError(f"bulge_direction must be one of {_DIRECTIONS}, got {bulge_direction!r}")
+    if tracer not in TRACERS:
+        raise ValueError(f"tracer must be one of {TRACERS}, got {tracer!r}")
+    if tracer == "silhouette" and chamber_region is not None:
+        raise ValueError("the silhouette tracer reads one chamber (the most central): chamber_region needs "
+                         "tracer='band'")
     if not (isinstance(n_profile, int | np.integer) and n_profile >= 11):
         raise ValueError(f"n_profile must be an int >= 11, got {n_profile!r}")
     settings = settings or TraceSettings()
@@ -272,7 +298,8 @@ def extract(
     first = src[0]
     ref_frame, ref_name = _reference(reference_frame, first, p)
     try:
-        tracers = _tracers(first if ref_frame is None else ref_frame, bulge_direction, chamber_region, settings)
+        tracers = _tracers(first if ref_frame is None else ref_frame, bulge_direction, chamber_region, settings,
+                           tracer, chamber, p)
     except ChamberNotFound as err:  # (not a bad chamber_region: that error says so itself)
         if ref_frame is not None:
             raise ChamberNotFound(f"{err} -- in the reference frame ({ref_name}), which must show the flat "
@@ -431,11 +458,44 @@ def _reference(reference_frame, first, p):
     return frame, name
 
 
-def _tracers(first, bulge_direction, chamber_region, settings):
+def _silhouette_tracer(first, bulge_direction, settings, chamber, p):
+    from osmobulge.imaging._facetrace import SilhouetteTracer
+
+    l0 = depth = None
+    if chamber is not None:
+        l0, depth = float(chamber.thickness) / p, float(chamber.depth) / p
+    return SilhouetteTracer(first, l0_px=l0, depth_px=depth, bulge_direction=bulge_direction, settings=settings)
+
+
+def _tracers(first, bulge_direction, chamber_region, settings, route="band", chamber=None, p=None):
     """The tracer of the chosen chamber, or (``"all"``) of every chamber whose two walls are in the field."""
+    if route == "silhouette":
+        return [_silhouette_tracer(first, bulge_direction, settings, chamber, p)]
     if chamber_region != "all":
-        return [ChamberTracer(first, bulge_direction=bulge_direction, chamber_region=chamber_region,
-                              thickness=None, settings=settings)]
+        try:
+            band = ChamberTracer(first, bulge_direction=bulge_direction, chamber_region=chamber_region,
+                                 thickness=None, settings=settings)
+        except ChamberNotFound as err:
+            if route != "auto" or chamber_region is not None:
+                raise
+            try:
+                return [_silhouette_tracer(first, bulge_direction, settings, chamber, p)]
+            except ChamberNotFound as err2:
+                raise ChamberNotFound(f"{err}; and by the walls' and film's silhouettes: {err2}") from err2
+        if route == "auto" and chamber_region is None:
+            # a band found in a look it does not fit (measured: an inverted bright-field film) does not read
+            # its own flat frame; the silhouette route then, when it finds the chamber
+            import copy
+
+            own = copy.deepcopy(band).process(first, 0)
+            if own.flag != "ok":
+                try:
+                    return [_silhouette_tracer(first, bulge_direction, settings, chamber, p)]
+                except ChamberNotFound as err2:
+                    raise ChamberNotFound(f"the band search finds a chamber but cannot read its own first frame "
+                                          f"({own.flag}, {own.flag_figure}); and by the walls' and film's "
+                                          f"silhouettes: {err2}") from err2
+        return [band]
     central = ChamberTracer(first, bulge_direction=bulge_direction, settings=settings)
     g = central.ref
     w = FrameView(first, central.k).shape[1]
@@ -459,11 +519,12 @@ def _tracers(first, bulge_direction, chamber_region, settings):
 #: must show the flat membrane; a first frame at Vtilde 0.05, height 0.1 a, still measures within 0.2 %)
 FIRST_FRAME_HEIGHT = 0.2
 #: what a failed chamber search adds: the looks the tracer cannot read yet, and the ways in
-_LOOK_HINT = (". The automatic search needs the well's liquid to differ in grey from the elastomer base and the "
-              "membrane to show as a filled band; a film seen only by its faces (bright field of a transparent "
-              "film), or well and base at one grey, is not found yet (osmobulge issue 16). Ways in: crop to one "
-              "chamber with chamber_region=(col0, col1) (bulge-up view) when several wells confuse the search, or "
-              "pick the profiles by hand in napari (python -m osmobulge.plugins EXPERIMENT, Profile picker)")
+_LOOK_HINT = (". Both searches failed: the band route needs a filled membrane band and a grey step between the "
+              "well's liquid and the base; the silhouette route needs an upright view with the two walls' "
+              "silhouettes in the base below a straight top face. Ways in: crop to one chamber with "
+              "chamber_region=(col0, col1) (bulge-up view) when several wells confuse the search, pass the chamber "
+              "(its membrane thickness and depth), or pick the profiles by hand in napari (python -m "
+              "osmobulge.plugins EXPERIMENT, Profile picker)")
 
 #: the ``reference_frame`` attr of an extraction whose chamber was found in the source's own first frame
 OWN_FIRST_FRAME = "first frame"
@@ -487,7 +548,7 @@ class _Run:
             "bulge_height", "volume_left", "volume_right", "area_left", "area_right", "rim_radius", "residual_rms",
             "volume_disagreement", "dome_contrast", "gap_length", "rim_contact", "neighbour_gap", "tilt", "drift_x",
             "drift_y", "axis_col", "axis_row", "volume_ellipse", "ellipse_a", "ellipse_b", "ellipse_rms",
-            "flag_value", "well_depth", "band_thickness", "wall_rms", "line_rms")}
+            "flag_value", "well_depth", "band_thickness", "wall_rms", "line_rms", "edge_jumps", "edge_lost")}
         self.flag = np.array(["no_membrane"] * n, dtype=object)
         self.flag_figure = np.array([""] * n, dtype=object)
         self.source_kind = np.array(["auto"] * n, dtype=object)
@@ -569,7 +630,8 @@ def _store(i, res, run, frame, p):
     message[i] = res.message
     scal["flag_value"][i] = res.flag_value
     scal["drift_x"][i], scal["drift_y"][i] = res.drift
-    for k in ("residual_rms", "volume_disagreement", "dome_contrast", "gap_length", "rim_contact", "neighbour_gap"):
+    for k in ("residual_rms", "volume_disagreement", "dome_contrast", "gap_length", "rim_contact", "neighbour_gap",
+              "edge_jumps", "edge_lost"):
         v = res.figures.get(k, np.nan)
         scal[k][i] = v if np.isfinite(v) else (np.inf if v == np.inf else np.nan)
     if g is None:
@@ -712,6 +774,7 @@ def _dataset(run, times, p, chamber_attrs, src, settings, bulge_direction, chamb
         "frame_interval": float(np.median(np.diff(times))) if n > 1 else 0.0,
         "bulge_direction": tracer.bulge_direction,
         "bulge_direction_requested": bulge_direction,
+        "tracer": getattr(tracer, "route", "band"),
         "chamber_region": "auto" if chamber_region is None else str(chamber_region),
         "errors": errors,
         "n_profile": int(n_profile),

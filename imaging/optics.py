@@ -212,7 +212,14 @@ def _radius_of_height(face, w, floor, rim_radius):
     return np.where((w >= floor) & (w <= top), out, 0.0)
 
 
-def optical_path(u, w, chambers, a, h, l0, optics: Optics):
+def _below(level, w, dw):
+    """Fraction of a sample of height ``dw`` centred at ``w`` lying below ``level`` (``w < level`` when dw is None)."""
+    if dw is None:
+        return (w < level).astype(float)
+    return np.clip((level - w) / dw + 0.5, 0.0, 1.0)
+
+
+def optical_path(u, w, chambers, a, h, l0, optics: Optics, dw=None):
     """OPD against water (m) and the path lengths in film, base and liquid at scene points.
 
     Parameters
@@ -223,6 +230,12 @@ def optical_path(u, w, chambers, a, h, l0, optics: Optics):
     chambers : list of (offset, r, z, thickness_ratio, lambda_pre)
         Each chamber's axis offset (m) and half profile (``r, z`` in units of
         ``a``, pole -> rim).
+    dw : float, m, optional
+        Height of the sample around each point: the flat faces (the device's top
+        face, the film's lower face, the well's bottom) are then area-weighted
+        over it, so a face between two samples is where it is, not at the
+        nearer sample (a face exactly on the grid is otherwise moved by up to
+        half a sample).
 
     Returns
     -------
@@ -230,17 +243,17 @@ def optical_path(u, w, chambers, a, h, l0, optics: Optics):
     """
     ne, nw, ns = optics.n_elastomer, optics.n_water, optics.n_liquid
     top = 0.5 * l0
-    in_slab = w < top
-    film_layer = in_slab & (w >= -top)
+    in_slab = _below(top, w, dw)  # under the top face
+    in_base = _below(-top, w, dw)  # under the film
     liquid = np.zeros_like(u)
     shell = np.zeros_like(u)
     for uc, r, z, t, lam in chambers:
         x = u - uc
         rim = a * lam
         # the well: radius linear from a (bottom) to a lambda_pre (top face)
-        in_well = (w < -top) & (w >= -top - h)
-        rw = a + (rim - a) * (w + top + h) / h
-        liquid += np.where(in_well, _chord(rw, x), 0.0)
+        in_well = in_base - _below(-top - h, w, dw)
+        rw = a + (rim - a) * (np.clip(w, -top - h, -top) + top + h) / h
+        liquid += in_well * _chord(rw, x)
         if np.max(z) * a <= 1e-3 * l0:  # flat membrane: no dome above the top face
             continue
         inner, outer = _faces(r, z, t, a, l0)
@@ -248,12 +261,11 @@ def optical_path(u, w, chambers, a, h, l0, optics: Optics):
         ro = _radius_of_height(outer, w, top, rim)
         ci = _chord(ri, x)
         co = _chord(np.maximum(ro, ri), x)
-        liquid += np.where(w >= -top, ci, 0.0)
-        shell += np.where(w >= top, co - ci, 0.0)
-    base_path = np.where(in_slab, optics.depth - liquid, 0.0)
-    base_path = np.clip(base_path, 0.0, None)
-    film_path = shell + np.where(film_layer, base_path, 0.0)
-    base_only = np.where(film_layer, 0.0, base_path)
+        liquid += (1.0 - in_base) * ci
+        shell += (1.0 - in_slab) * (co - ci)
+    slab = np.clip(optics.depth - liquid, 0.0, None)
+    film_path = shell + (in_slab - in_base) * slab
+    base_only = in_base * slab
     opd = (ne - nw) * (film_path + base_only) + (ns - nw) * liquid
     return opd, film_path, base_only, liquid
 
@@ -297,7 +309,7 @@ def render_optical(shape, to_scene, chambers, a, h, l0, pixel_size, optics: Opti
     pr = (rr + 0.5) / s - 0.5  # sub-sample centres in pixel coordinates
     pc = (cc + 0.5) / s - 0.5
     u, w = to_scene(pc, pr)
-    opd, p_film, p_base, p_liq = optical_path(u, w, chambers, a, h, l0, optics)
+    opd, p_film, p_base, p_liq = optical_path(u, w, chambers, a, h, l0, optics, dw=q)
     g_row, g_col = np.gradient(opd, q)
     theta = np.hypot(g_row, g_col)
     light = transmission(theta, optics)

@@ -231,6 +231,8 @@ class ChamberTracer:
     settings : TraceSettings
     """
 
+    route = "band"
+
     def __init__(self, first_frame, *, bulge_direction="auto", chamber_region=None, thickness=None,
                  settings=None):
         valid = ("auto", *ROTATIONS)

@@ -59,7 +59,13 @@ def test_gates_leave_a_good_extraction_alone():
     assert list(ds["flag"].values) == ["ok"] * 5
 
 
-def test_optics_look_without_grey_step_is_an_error_that_names_the_ways_in():
-    s = render_look("edge_dark", [0.0, 0.5], shape=(500, 640), pixel_size=1e-6)
-    with pytest.raises(ValueError, match="chamber_region=.*napari"):
+def test_a_look_neither_route_reads_is_an_error_that_names_the_ways_in():
+    """Edge-only faces (no band, no grey step) in a tilted view: neither the band nor the silhouette route."""
+    from dataclasses import replace
+
+    from osmobulge.imaging.looks import LOOKS
+
+    s = render_look("edge_dark", [0.0, 0.5], shape=(500, 640), pixel_size=1e-6,
+                    nuisances=replace(LOOKS["edge_dark"].nuisances, tilt=1.0))
+    with pytest.raises(ValueError, match="silhouette.*chamber_region=.*napari"):
         extract(s.frames, pixel_size=1e-6, frame_interval=600.0, progress=False)

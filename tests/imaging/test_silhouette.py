@@ -6,7 +6,7 @@ from osmobulge.imaging._chamber import ChamberNotFound
 from osmobulge.imaging._silhouette import find_walls
 from osmobulge.imaging.looks import LOOKS, render_look
 
-# every preset whose walls show as silhouettes (bright field); dark field (bright_band) must refuse
+# every preset whose walls show as silhouettes (bright field); dark field must refuse
 BRIGHT_FIELD = ["absorbing_band", "edge_dark", "edge_bright", "halo", "no_grey_step", "defocus", "inverted",
                 "film_10um", "film_26um", "coarse_2um", "uneven_8bit"]
 
@@ -26,7 +26,7 @@ def test_rim_radius_within_half_a_pixel(name):
 
 
 def test_dark_field_is_refused_not_measured():
-    s = render_look("bright_band", [0.0], shape=(700, 900))
+    s = render_look("dark_field", [0.0], shape=(700, 900))
     with pytest.raises(ChamberNotFound, match="not straight|top face|silhouette"):
         find_walls(s.frames[0], 20e-6 / 0.8e-6, depth_px=110e-6 / 0.8e-6)
 

@@ -1,0 +1,604 @@
+r"""Trace a dome seen only by its faces: the look-agnostic route of the tracer (issue 16).
+
+In transmitted bright field a transparent film in water is not a filled band:
+what shows it is the light its faces bend out of the objective.  The dome is
+then the silhouette of a shell of revolution: a sharp edge at its **outer
+face** (outside it the light passes straight), and inside a zone whose width
+and sign depend on focus, condenser and the film's index (lensing, fringes).
+The walls are silhouettes of the well's cylinder, the flat film two faint face
+lines.  :class:`SilhouetteTracer` therefore reads, in each bulge-up frame:
+
+1. **walls and rim** (:func:`osmobulge.imaging._silhouette.find_walls`): the
+   top face and the two walls in the first (flat) frame; in later frames the
+   same walls within ``settings.max_drift`` px, the rows registered by phase
+   correlation of the base (walls, well bottom; no dome there) against the
+   first frame;
+2. **the change**: the frame minus the first frame shifted by that drift,
+   relative to the local light (so the flat film, the walls and uneven light
+   cancel, and only what moved is left: the dome);
+3. **the outer face**: along rays from the rim plane's centre, walking in from
+   the frame's edge, the first strong feature (of the dome's own sign; a halo or
+   fringe of the other sign is not it) and on its outer flank the steepest rise
+   (sub-pixel): the silhouette edge.  Rays whose edge jumps from its
+   neighbours' (another fringe, dust) are dropped and counted;
+4. **the mid-surface**: the outer face offset inwards by half the film's
+   thickness :math:`l = l_0 \pi R^2 / A` (incompressible film of uniform
+   stretch over the rim disc, :math:`R` the rim radius); to first order in
+   :math:`l` the volume between the outer face and the mid-surface is
+   :math:`l_0 \pi R^2 / 2` whatever the stretch's distribution, so the volume
+   does not depend on that assumption;
+5. **measures and flags**: volume and area of both halves
+   (:func:`osmobulge.imaging.geometry.revolution_measures`) and the quality
+   figures of :class:`osmobulge.imaging.trace.FrameTrace`, with two of this route:
+   ``edge_jumps`` (fraction of rays whose edge jumped) and ``edge_lost``
+   (fraction of rays over the dome without an edge).
+
+The frame must be upright within a pixel over the field (the top face a row),
+as the silhouettes are searched row by row; :class:`SilhouetteTracer` refuses a
+tilted first frame.  Everything is in pixels of the bulge-up view.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy import ndimage
+from scipy.spatial import cKDTree
+from skimage.registration import phase_cross_correlation
+
+from osmobulge.imaging._chamber import ROTATIONS, ChamberGeometry, ChamberNotFound, FrameView, Line, Well
+from osmobulge.imaging._silhouette import find_walls
+from osmobulge.imaging.geometry import revolution_measures, smooth_profile
+
+__all__ = ["SilhouetteTracer"]
+
+#: angular range of the rays (rad from the rim plane, each side) and their number
+_RAY_MIN, _N_RAYS = np.radians(1.0), 721
+#: samples along a ray (px) and the Gaussian smoothing of the change image (px)
+_RAY_STEP, _SMOOTH = 0.5, 0.7
+#: an edge further than this (px) from the running median of its neighbours' is a jump
+_JUMP_PX = 3.0
+#: fraction of rays over the dome whose edge jumped, or that have none, that flags poor_fit
+_JUMP_FLAG, _LOST_FLAG = 0.05, 0.10
+#: station spacing (px) along the outer face for the second pass, and its normals' reach and step (px)
+_STATION_STEP, _NORMAL_REACH, _NORMAL_STEP = 1.5, 8.0, 0.25
+#: height (px) above the top face below which the outer face's edge is not used (the feet), and the
+#: dome height below which a frame is flagged poor_fit (figure low_dome): its edge is mostly feet
+_FOOT_PX, _LOW_DOME_PX = 4.0, 8.0
+#: rows of the base the walls are followed down, as fractions of the well depth (more rows than
+#: find_walls' default, which must also work with a guessed depth)
+_STRIP = (0.1, 0.8)
+#: largest difference (px) between the top face's rows at the field's two sides
+_MAX_TILT_PX = 1.0
+
+
+def _relative(img, sigma=25.0):
+    """The local light level (Gaussian of ``sigma`` px), never below a millionth of its maximum."""
+    bg = ndimage.gaussian_filter(img, sigma, mode="nearest")
+    return np.maximum(bg, 1e-6 * max(float(bg.max()), 1e-30))
+
+
+def _deviation(img):
+    """|img / local light - 1|, scaled by its 99.5th percentile (the map the silhouettes are found on)."""
+    bg = _relative(img)
+    d = np.abs(img - bg) / bg
+    return d / max(float(np.percentile(d, 99.5)), 1e-12)
+
+
+def _walls_any_depth(view, l0_px, depth_px):
+    """find_walls, trying well depths of 100, 50, 25 and 200 px when the depth is not known.
+
+    A guess is taken when the well's bottom face is found below the rows the
+    walls were searched in (the upper 60 % of the guessed depth).
+    """
+    if depth_px is not None:
+        return find_walls(view, l0_px, depth_px=depth_px)
+    d = _deviation(view)
+    err = None
+    for guess in (100.0, 50.0, 25.0, 200.0):
+        try:
+            w = find_walls(view, l0_px, depth_px=guess)
+        except ChamberNotFound as e:
+            err = e
+            continue
+        depth = SilhouetteTracer._depth(d, w)
+        if np.isfinite(depth) and depth >= 0.6 * guess:
+            return w
+        err = ChamberNotFound(f"no well bottom below the walls searched for a {guess:.0f} px deep well")
+    raise err
+
+
+def _plausible(view, w, l0_px, depth_px):
+    """Why the walls ``w`` found in ``view`` are not a chamber seen dome side up ("" if they are).
+
+    The well's bottom face must lie below the walls (at ``depth_px`` within
+    15 % when known) and the flat film's lower face over the well ``l0_px``
+    below its top face (within 30 %, when known).
+    """
+    d = _deviation(view)
+    depth = SilhouetteTracer._depth(d, w)
+    if not np.isfinite(depth):
+        return "no well bottom below the walls"
+    if depth_px is not None and abs(depth - depth_px) > 0.15 * depth_px:
+        return f"the well bottom is {depth:.0f} px below the top face's base, not {depth_px:.0f} px"
+    if l0_px is not None:
+        l0 = _film_thickness(d, w.top_row, w.left, w.right, l0_px)
+        if not (np.isfinite(l0) and abs(l0 - l0_px) <= 0.3 * l0_px):
+            return f"the flat film over the well is {l0:.1f} px thick, not {l0_px:.1f} px"
+    return ""
+
+
+def _upright(frame, l0_px, depth_px, known_l0):
+    """The quarter turn whose view shows a chamber dome side up (walls below a top face), and its walls.
+
+    Of the orientations where the walls are found and the chamber is
+    plausible (:func:`_plausible`), the one with the straightest walls.
+    """
+    best, errors = None, []
+    for name, k in ROTATIONS.items():
+        view = np.rot90(np.asarray(frame, float), k)
+        try:
+            w = _walls_any_depth(view, l0_px, depth_px)
+        except ChamberNotFound as err:
+            errors.append(f"{name}: {err}")
+            continue
+        why = _plausible(view, w, l0_px if known_l0 else None, depth_px)
+        if why:
+            errors.append(f"{name}: {why}")
+            continue
+        if best is None or w.rms < best[2].rms:
+            best = (name, k, w)
+    if best is None:
+        raise ChamberNotFound("no top face with two wall silhouettes below it in any orientation (" +
+                              "; ".join(errors) + ")")
+    return best
+
+
+def _film_thickness(d, top_row, left, right, guess):
+    """Face-to-face distance (px) of the flat film over the well, or nan.
+
+    Its lower face is the second line below the top face, or (a filled,
+    absorbing band) where the band ends, at half its level.
+    """
+    cols = np.arange(int(left + 0.2 * (right - left)), int(right - 0.2 * (right - left)))
+    r0 = int(top_row) + 3
+    r1 = min(int(top_row + 2.5 * guess) + 3, d.shape[0] - 1)
+    prof = np.median(d[r0:r1, cols], axis=1)
+    if prof.size < 5:
+        return np.nan
+    if prof[0] > 0.5 * prof.max():  # a filled band: its lower edge
+        k = int(np.argmax(prof < 0.5 * prof[0]))
+        if k == 0:
+            return np.nan
+        f = (prof[k - 1] - 0.5 * prof[0]) / (prof[k - 1] - prof[k])
+        return float(r0 + k - 1 + f - top_row)
+    k = int(np.argmax(prof))
+    if prof[k] < 0.1 or k in (0, prof.size - 1):
+        return np.nan
+    a, b, c = prof[k - 1], prof[k], prof[k + 1]
+    den = a - 2 * b + c
+    off = 0.5 * (a - c) / den if den < 0 else 0.0
+    return float(r0 + k + np.clip(off, -0.5, 0.5) - top_row)
+
+
+def _edge_on_ray(prof, thr, window):
+    """Sub-sample index of a ray's outer edge (``prof`` runs from outside in), or nan."""
+    hit = np.flatnonzero(prof > thr)
+    if hit.size == 0:
+        return np.nan, 0.0
+    i0 = int(hit[0])
+    pk = i0 + int(np.argmax(prof[i0 : i0 + window]))
+    lo = max(i0 - 8, 1)
+    if pk <= lo:
+        return np.nan, float(prof[pk])
+    dp = np.gradient(prof[: pk + 2])
+    m = lo + int(np.argmax(dp[lo : pk + 1]))
+    if m >= dp.size - 1:
+        return np.nan, float(prof[pk])
+    a, b, c = dp[m - 1], dp[m], dp[m + 1]
+    den = a - 2 * b + c
+    off = 0.5 * (a - c) / den if den < 0 else 0.0
+    return m + float(np.clip(off, -0.5, 0.5)), float(prof[pk])
+
+
+def _thickness(u, z, rim_l, rim_r, l0):
+    r"""The film's thickness along a mid-surface curve (left rim -> right rim), px.
+
+    Kinematics of an incompressible film of uniform meridional stretch: each
+    half's material radius :math:`R_0` runs linearly in arc length from the
+    rim (:math:`R_0 = R`) to the pole (0), so :math:`\lambda_1 = L/R` (arc
+    length over rim radius), :math:`\lambda_2 = r/R_0` and
+    :math:`l = l_0/(\lambda_1 \lambda_2)`: :math:`l_0/\lambda_1^2` at the pole,
+    :math:`l_0/\lambda_1` at the rim.  Whatever the law, :math:`\int l\,dA =
+    l_0 \pi R^2` (the film over the well is conserved), so the volume between
+    the outer face and the mid-surface is right to first order in :math:`l`.
+    """
+    arc = np.r_[0.0, np.cumsum(np.hypot(np.diff(u), np.diff(z)))]
+    pole = int(np.argmin(np.abs(u)))
+    out = np.empty_like(u)
+    for sl, rim, dist in ((slice(0, pole + 1), rim_l, arc[: pole + 1]),
+                          (slice(pole + 1, None), rim_r, arc[-1] - arc[pole + 1 :])):
+        length = max(float(arc[pole] if sl.start == 0 else arc[-1] - arc[pole]), 1e-9)
+        lam1 = max(length / rim, 1.0)
+        r0 = rim * (1.0 - np.clip(dist, 0.0, length) / length)  # material radius
+        r = np.abs(u[sl])
+        lam2 = np.where(r0 > 1.0, r / np.maximum(r0, 1e-9), lam1)
+        out[sl] = l0 / (lam1 * np.maximum(lam2, 1e-3))
+    return np.minimum(out, l0)
+
+
+class SilhouetteTracer:
+    """Follows one chamber seen by its silhouettes through a series (see the module's notes).
+
+    The same interface as :class:`osmobulge.imaging.trace.ChamberTracer`
+    (``ref``, ``k``, ``process``), so :func:`osmobulge.imaging.extract.extract`
+    runs either.
+
+    Parameters
+    ----------
+    first_frame : ndarray of shape (H, W)
+        The flat membrane.
+    l0_px : float, optional
+        Membrane thickness (px); measured from the flat film's two faces when not given.
+    depth_px : float, optional
+        Well depth (px), where the walls are searched (its upper half); measured when not given.
+    bulge_direction : {"auto", "up", "down", "left", "right"}
+    settings : TraceSettings, optional
+        ``max_drift``, ``residual_flag``, ``asymmetry_flag`` and ``gap_flag`` are used.
+    """
+
+    route = "silhouette"
+
+    def __init__(self, first_frame, *, l0_px=None, depth_px=None, bulge_direction="auto", settings=None):
+        from osmobulge.imaging.trace import TraceSettings
+
+        frame = np.asarray(first_frame)
+        if frame.ndim != 2:
+            raise ValueError(f"frames must be 2-D (H, W), got shape {frame.shape}")
+        self.settings = settings or TraceSettings()
+        guess = 25.0 if l0_px is None else float(l0_px)
+        if bulge_direction == "auto":
+            bulge_direction, self.k, w = _upright(frame, guess, depth_px, l0_px is not None)
+        else:
+            self.k = ROTATIONS[bulge_direction]
+            view = np.rot90(np.asarray(frame, float), self.k)
+            w = _walls_any_depth(view, guess, depth_px)
+            why = _plausible(view, w, l0_px, depth_px)
+            if why:
+                raise ChamberNotFound(f"no chamber seen dome side {bulge_direction}: {why}")
+        self.bulge_direction = bulge_direction
+        img = np.rot90(np.asarray(frame, float), self.k)
+        d = _deviation(img)
+        if l0_px is None:  # the flat film's faces over the well
+            l0_px = _film_thickness(d, w.top_row, w.left, w.right, guess)
+            if not (np.isfinite(l0_px) and l0_px > 1.0):
+                raise ChamberNotFound("the flat film's lower face over the well is not seen: pass the chamber "
+                                      "(its membrane thickness)")
+        self.l0 = float(l0_px)
+        if depth_px is None:
+            depth_px = self._depth(d, w, w.top_row + self.l0)
+        self.depth = float(depth_px)
+        w = find_walls(img, self.l0, depth_px=self.depth, top_row=w.top_row, strip=_STRIP)
+        self._check_upright(d, w)
+        self._check_flat(d, w)
+        self.walls0 = w
+        self.polarity = 0  # the dome's sign (+1 darker than the water), from the first frame showing it
+        self.shape = frame.shape
+        self.ref = self._geometry(w)
+        self.blur = np.nan
+        self._flat = img.astype(np.float32)
+        self._bg = _relative(img).astype(np.float32)
+        # the base below the film (walls, well bottom), registered frame to frame; no dome there
+        self._reg_rows = (int(np.ceil(w.base_row + 5)), img.shape[0])
+        r0, r1 = self._reg_rows
+        self._reg_ref = img[r0:r1]
+        self.prev = None
+
+    # ---------------------------------------------------------------------- first frame
+    @staticmethod
+    def _depth(d, w, base_row=None):
+        """Well depth (px) below ``base_row`` (default the walls'): the strongest row over the well's middle
+        that is weak outside it (the bottom face)."""
+        base_row = w.base_row if base_row is None else base_row
+        c0, c1 = int(w.left + 0.2 * (w.right - w.left)), int(w.right - 0.2 * (w.right - w.left))
+        r0 = int(base_row + 20)
+        if r0 >= d.shape[0] - 3:
+            return np.nan
+        inside = np.median(d[r0:, c0:c1], axis=1)
+        out_cols = np.r_[np.arange(0, max(int(w.left) - 20, 0)), np.arange(min(int(w.right) + 20, d.shape[1]),
+                                                                            d.shape[1])]
+        outside = np.median(d[r0:, out_cols], axis=1) if out_cols.size else np.zeros_like(inside)
+        score = inside - outside
+        k = int(np.argmax(score))
+        return float(r0 + k - base_row) if score[k] > 0.1 else np.nan
+
+    def _check_upright(self, d, w):
+        """Refuse a tilted view: the top face left and right of the well must lie on one row within a pixel.
+
+        The lag between the two sides' mean profiles across the top face
+        (their cross-correlation's peak, sub-pixel): any look of the face.
+        """
+        lo, hi = max(int(w.top_row) - 15, 0), min(int(w.top_row) + 16 + int(self.l0), d.shape[0])
+        sides = [d[lo:hi, sl].mean(axis=1) for sl in (slice(0, int(w.left) - 10), slice(int(w.right) + 10, None))
+                 if d[lo:hi, sl].shape[1] >= 20]
+        if len(sides) < 2:
+            return
+        a, b = (x - x.mean() for x in sides)
+        lags = np.arange(-8, 9)
+        cc = np.array([np.sum(a[8:-8] * np.roll(b, -k)[8:-8]) for k in lags])
+        k = int(np.argmax(cc))
+        lag = float(lags[k])
+        if 0 < k < lags.size - 1:
+            den = cc[k - 1] - 2 * cc[k] + cc[k + 1]
+            lag += 0.5 * (cc[k - 1] - cc[k + 1]) / den if den < 0 else 0.0
+        if abs(lag) > _MAX_TILT_PX:
+            raise ChamberNotFound(f"the top face is tilted ({lag:+.1f} px from the left of the field to its "
+                                  f"right): the silhouette tracer needs an upright view; rotate the series or pick "
+                                  f"the profiles")
+
+    @staticmethod
+    def _check_flat(d, w):
+        """Refuse a first frame with a dome already standing: it is the reference every change is measured from.
+
+        Over the well, the water above the top face must look as it does beside
+        the well: a feature in most of its columns (the largest difference from
+        the rows' median beside the well, smoothed over 1 px; median over the
+        columns) above a quarter of the walls' level is a dome.
+        """
+        rim = w.rim_radius
+        r1 = int(w.top_row) - 4
+        r0 = max(int(w.top_row - 3.0 * rim), 0)
+        c0, c1 = max(int(w.axis_col - rim), 0), min(int(w.axis_col + rim) + 1, d.shape[1])
+        beside = np.r_[np.arange(0, max(int(w.axis_col - 1.6 * rim), 0)),
+                       np.arange(min(int(w.axis_col + 1.6 * rim), d.shape[1]), d.shape[1])]
+        if r1 - r0 < 3 or c1 - c0 < 10 or beside.size < 10:
+            return
+        walls = d[int(w.base_row + 5) : int(w.base_row + 40)]
+        wall_level = float(np.percentile(walls, 99.9)) if walls.size else 1.0
+        rows = ndimage.gaussian_filter(d[r0:r1], 1.0)
+        diff = np.abs(rows[:, c0:c1] - np.median(rows[:, beside], axis=1)[:, None])
+        level = float(np.median(diff.max(axis=0))) / max(wall_level, 1e-12)
+        if level > 0.25:
+            raise ChamberNotFound(f"a dome already stands above the top face in this frame (feature level "
+                                  f"{level:.2f} of the walls' over the well): the first frame must show the flat "
+                                  f"membrane")
+
+    def _geometry(self, w):
+        rim = w.rim_radius
+        line = Line(float(w.axis_col), float(w.top_row + 0.5 * self.l0), 0.0)
+        return ChamberGeometry(line=line, thickness=self.l0, polarity=1 if self.polarity >= 0 else -1,
+                               rim_radius=float(rim), well=Well(-float(rim), float(rim), depth=self.depth),
+                               wall_rms=float(w.rms))
+
+    # ---------------------------------------------------------------------- one frame
+    def _walls(self, img):
+        """This frame's walls and its drift (dx, dy) from the first frame."""
+        r0, r1 = self._reg_rows
+        shift, _, _ = phase_cross_correlation(self._reg_ref, img[r0:r1], upsample_factor=20, normalization=None)
+        dy, dx = -float(shift[0]), -float(shift[1])
+        if max(abs(dx), abs(dy)) > self.settings.max_drift:
+            raise ChamberNotFound(f"the base moved {np.hypot(dx, dy):.0f} px since the first frame (more than "
+                                  f"max_drift)")
+        w0 = self.walls0
+        w = find_walls(img, self.l0, depth_px=self.depth, top_row=w0.top_row + dy, strip=_STRIP,
+                       near=(w0.left + dx, w0.right + dx))
+        return w, dx, dy
+
+    def process(self, frame, index=0, *, guide=None, manual=None):
+        """Measure one frame (``guide`` is not needed by this route and ignored); returns a FrameTrace."""
+        from osmobulge.imaging.trace import FrameTrace
+
+        frame = np.asarray(frame)
+        if frame.shape != self.shape:
+            raise ValueError(f"frame {index} has shape {frame.shape}, expected {self.shape}")
+        img = np.rot90(frame.astype(float, copy=False), self.k)
+        out = FrameTrace(index=index)
+        try:
+            w, dx, dy = self._walls(img)
+        except ChamberNotFound as err:
+            out.message = f"chamber walls not found: {err}"
+            out.flag, out.flag_figure, out.flag_value = "no_membrane", "wall_rms", np.nan
+            return out
+        g = self._geometry(w)
+        out.geometry, out.drift = g, (dx, dy)
+        if manual is not None:
+            return self._from_points(frame, g, out, manual)
+        ref = ndimage.shift(self._flat, (dy, dx), order=1, mode="nearest")
+        bg = ndimage.shift(self._bg, (dy, dx), order=1, mode="nearest")
+        change = ndimage.gaussian_filter((img - ref) / bg, _SMOOTH)
+        top = w.top_row
+        water = change[: max(int(top) - 5, 10)]
+        # (never below 1e-4 of the light: the first frame is its own reference and changes by nothing)
+        noise = max(1.4826 * float(np.median(np.abs(water - np.median(water)))), 1e-4)
+        u, z, figs = self._outer_face(change, w, noise)
+        out.figures.update(figs)
+        if u is None:  # no dome: flat (the film unchanged) or gone
+            return self._flat_or_gone(change, w, noise, g, out)
+        return self._finish(u, z, w, g, out)
+
+    def _rays(self, change, w):
+        phis = np.linspace(_RAY_MIN, np.pi - _RAY_MIN, _N_RAYS)
+        rows, cols = change.shape
+        tmax = float(np.hypot(max(w.axis_col, cols - w.axis_col), w.top_row))
+        t = np.arange(tmax, 0.0, -_RAY_STEP)
+        x = w.axis_col + t[None, :] * np.cos(phis)[:, None]
+        y = w.top_row - t[None, :] * np.sin(phis)[:, None]
+        v = ndimage.map_coordinates(change, [y.ravel(), x.ravel()], order=1, cval=0.0).reshape(x.shape)
+        return phis, t, v
+
+    def _outer_face(self, change, w, noise):
+        """Outer-face points (u, z) from the rays (px from the axis and the top face), or None; figures."""
+        phis, t, v = self._rays(change, w)
+        extreme = v[np.arange(v.shape[0]), np.argmax(np.abs(v), axis=1)]
+        strength = np.abs(extreme)
+        if np.median(strength) < 10.0 * noise:
+            return None, None, {"dome_contrast": float(np.median(strength) / max(noise, 1e-12))}
+        sign = float(np.sign(np.median(extreme[strength > 10.0 * noise])))
+        self.polarity = int(-sign)  # +1: the dome darker than the water
+        prof = np.clip(sign * v, 0.0, None)
+        thr = max(8.0 * noise, 0.2 * float(np.median(prof.max(axis=1))))
+        window = int(12.0 / _RAY_STEP)
+        edge = np.array([_edge_on_ray(prof[k], thr, window)[0] for k in range(phis.size)])
+        te = np.interp(edge, np.arange(t.size), t, left=np.nan, right=np.nan)
+        found = np.isfinite(te)
+        # jumps: an edge off its neighbours' running median
+        med = ndimage.median_filter(np.where(found, te, np.nanmedian(te) if found.any() else 0.0), size=9,
+                                    mode="nearest")
+        jump = found & (np.abs(te - med) > _JUMP_PX)
+        good = found & ~jump
+        figs = {"dome_contrast": float(np.median(strength) / max(noise, 1e-12))}
+        if good.sum() < 20:
+            figs.update({"edge_jumps": float(jump.mean()), "edge_lost": float(1.0 - found.mean())})
+            return None, None, figs
+        u, z = te[good] * np.cos(phis[good]), te[good] * np.sin(phis[good])
+        # second pass: along the normals of that curve at even arc length (the rays crowd at a flat dome's
+        # pole and leave its rims bare)
+        u, z, more = self._along_normals(change, w, u[::-1], z[::-1], sign, thr)  # left rim -> right rim
+        figs.update(more)
+        return u, z, figs
+
+    def _feet(self, w, u, z):
+        """The outer face's points with its feet on the top face at the rim, left rim -> right rim."""
+        return np.r_[[[w.left - w.axis_col, 0.0]], np.c_[u, z], [[w.right - w.axis_col, 0.0]]]
+
+    def _along_normals(self, change, w, u, z, sign, thr):
+        """Outer-face edges along the normals of the curve through ``(u, z)``, every 1.5 px; figures.
+
+        A station whose edge lies more than ``_JUMP_PX`` off the first curve
+        jumped (another fringe, dust) and is dropped; ``edge_lost``: stations
+        without an edge; ``gap_length``: their longest run, / l0.
+        """
+        spl = smooth_profile(self._feet(w, u, z), sigma=1.0)
+        s, xy = spl.sample(step=_STATION_STEP)
+        s, xy = s[1:-1], xy[1:-1]  # (not the feet themselves)
+        tang = spl.tangent(s)
+        nu, nz = -tang[:, 1], tang[:, 0]  # outward
+        offs = np.arange(_NORMAL_REACH, -_NORMAL_REACH - 1e-9, -_NORMAL_STEP)  # outside -> inside
+        pu = xy[:, 0, None] + offs[None, :] * nu[:, None]
+        pz = xy[:, 1, None] + offs[None, :] * nz[:, None]
+        v = ndimage.map_coordinates(change, [(w.top_row - pz).ravel(), (w.axis_col + pu).ravel()], order=1,
+                                    cval=0.0).reshape(pu.shape)
+        prof = np.clip(sign * v, 0.0, None)
+        window = int(12.0 / _NORMAL_STEP)
+        edge = np.array([_edge_on_ray(prof[k], thr, window)[0] for k in range(s.size)])
+        o = np.interp(edge, np.arange(offs.size), offs, left=np.nan, right=np.nan)
+        found = np.isfinite(o)
+        jump = found & (np.abs(o) > _JUMP_PX)
+        good = found & ~jump
+        run = longest = 0
+        for ok in found:
+            run = 0 if ok else run + 1
+            longest = max(longest, run)
+        figs = {"edge_jumps": float(jump.mean()), "edge_lost": float(1.0 - found.mean()),
+                "gap_length": float(longest * _STATION_STEP / self.l0)}
+        og = o[good]
+        u, z = xy[good, 0] + og * nu[good], xy[good, 1] + og * nz[good]
+        # the feet: within _FOOT_PX of the top face the dome's edge merges with the flat film's lines; the
+        # spline bridges from the rim to the first points above (a dome not yet that high is flagged)
+        high = z > _FOOT_PX
+        figs["low_dome"] = float(np.max(z)) if z.size else 0.0
+        if high.sum() >= 20:
+            u, z = u[high], z[high]
+        return u, z, figs
+
+    def _flat_or_gone(self, change, w, noise, g, out):
+        """A frame without a dome edge: the flat film (volume 0) if its faces are where they were, else gone."""
+        c0, c1 = int(w.axis_col - 0.8 * w.rim_radius), int(w.axis_col + 0.8 * w.rim_radius)
+        r0, r1 = int(w.top_row - 3), int(w.base_row + 4)
+        moved = float(np.median(np.max(np.abs(change[r0:r1, c0:c1]), axis=0)))
+        out.figures["dome_contrast"] = out.figures.get("dome_contrast", 0.0)
+        if moved > 10.0 * noise:  # the film's faces changed but no dome rose: no membrane over the well
+            out.message = "no dome edge, and the flat film's faces over the well are gone"
+            out.flag, out.flag_figure, out.flag_value = "no_membrane", "dome_contrast", out.figures["dome_contrast"]
+            return out
+        rim = w.rim_radius
+        u = np.linspace(-rim, rim, 201)
+        out.u, out.z = u, np.zeros_like(u)
+        out.points_u, out.points_z = out.u, out.z
+        out.residual_rms = 0.0
+        out.volume_left = out.volume_right = 0.0
+        out.area_left = out.area_right = np.pi * rim**2  # (each half doubled, as revolution_measures)
+        out.height = 0.0
+        out.figures.update({"residual_rms": 0.0, "volume_disagreement": 0.0, "gap_length": 0.0,
+                            "edge_jumps": 0.0, "edge_lost": 0.0})
+        out.flag, out.flag_figure, out.flag_value = "ok", "", np.nan
+        out.ok, out.mode, out.geometry = True, "flat", g
+        return out
+
+    def _finish(self, u, z, w, g, out):
+        rim_l, rim_r = w.axis_col - w.left, w.right - w.axis_col
+        spl = smooth_profile(self._feet(w, u, z), sigma=0.5)  # the outer face meets the top face at the rim
+        s, xy = spl.sample(step=1.0)
+        # the traced points' distance from the curve (sampled at 0.2 px)
+        _, dense = spl.sample(step=0.2)
+        resid = float(np.sqrt(np.mean(cKDTree(dense).query(np.c_[u, z])[0] ** 2)))
+        tang = spl.tangent(s)
+        normal = np.c_[-tang[:, 1], tang[:, 0]]  # outward for a curve left rim -> over the top -> right rim
+        l0, rim = self.l0, 0.5 * (rim_l + rim_r)
+        # the film's thickness along the curve: uniform first, then from the kinematics of the last mid-surface
+        lthick = np.full(len(xy), l0)
+        for _ in range(3):
+            mid = xy - 0.5 * lthick[:, None] * normal
+            mu, mz = mid[:, 0], mid[:, 1] + 0.5 * l0
+            try:
+                m = revolution_measures(np.r_[-rim_l, mu[mz > 0], rim_r], np.r_[0.0, mz[mz > 0], 0.0])
+            except ValueError as err:
+                out.message = str(err)
+                out.flag, out.flag_figure, out.flag_value = "poor_fit", "residual_rms", float(resid)
+                return out
+            # (on the curve from rim to rim: the outer face's feet offset inwards lie inside the rim)
+            lthick = _thickness(np.r_[-rim_l, mu, rim_r], np.r_[0.0, np.maximum(mz, 0.0), 0.0], rim_l, rim_r,
+                                l0)[1:-1]
+        keep = mz > 0.0
+        mu, mz = np.r_[-rim_l, mu[keep], rim_r], np.r_[0.0, mz[keep], 0.0]
+        out.u, out.z = mu, mz
+        out.points_u, out.points_z = u, z + 0.5 * l0
+        out.residual_rms = float(resid)
+        out.volume_left, out.volume_right = m.volume_left, m.volume_right
+        out.area_left, out.area_right = m.area_left, m.area_right
+        out.height = m.height
+        floor = 5.0 * np.pi * rim**2
+        out.figures.update({"residual_rms": float(resid), "film_thickness": float(np.min(lthick)),
+                            "volume_disagreement": float(abs(m.volume_left - m.volume_right) /
+                                                         max(abs(m.volume), floor))})
+        out.flag, out.flag_figure, out.flag_value = self._flag(out.figures)
+        out.ok, out.mode = True, "silhouette"
+        if out.flag == "ok":
+            self.prev = out
+        return out
+
+    def _flag(self, fig):
+        st = self.settings
+        checks = [
+            ("fractured", "gap_length", fig.get("gap_length", 0.0) > st.gap_flag),
+            ("poor_fit", "low_dome", fig.get("low_dome", np.inf) < _LOW_DOME_PX),
+            ("poor_fit", "edge_lost", fig.get("edge_lost", 0.0) > _LOST_FLAG),
+            ("poor_fit", "edge_jumps", fig.get("edge_jumps", 0.0) > _JUMP_FLAG),
+            ("poor_fit", "residual_rms", not fig["residual_rms"] <= st.residual_flag),
+            ("poor_fit", "volume_disagreement", fig.get("volume_disagreement", 0.0) > st.asymmetry_flag),
+        ]
+        for name, key, hit in checks:
+            if hit:
+                return name, key, float(fig[key])
+        return "ok", "", np.nan
+
+    def _from_points(self, frame, g, out, manual):
+        """A manual profile (stored-frame ``(x=col, y=row)`` px) replaces the trace."""
+        view = FrameView(frame, self.k)
+        pts = np.asarray(manual, float)
+        vx, vy = view.from_frame(pts[:, 1], pts[:, 0])
+        u, z = g.line.coords(np.c_[vx, vy])
+        if u[0] > u[-1]:
+            u, z = u[::-1], z[::-1]
+        _, puz = smooth_profile(np.c_[u, z]).sample(step=1.0)
+        out.u, out.z = puz[:, 0], puz[:, 1]
+        out.points_u, out.points_z = u, z
+        out.source = "manual"
+        out.residual_rms = 0.0
+        m = revolution_measures(out.u, out.z)
+        out.volume_left, out.volume_right = m.volume_left, m.volume_right
+        out.area_left, out.area_right = m.area_left, m.area_right
+        out.height = m.height
+        out.figures.update({"residual_rms": 0.0})
+        out.flag, out.flag_figure, out.flag_value = "ok", "", np.nan
+        out.ok = True
+        return out
