@@ -64,6 +64,10 @@ _STATION_STEP, _NORMAL_REACH, _NORMAL_STEP = 1.5, 8.0, 0.25
 #: height (px) above the top face below which the outer face's edge is not used (the feet), and the
 #: dome height below which a frame is flagged poor_fit (figure low_dome): its edge is mostly feet
 _FOOT_PX, _LOW_DOME_PX = 4.0, 8.0
+#: largest disagreement between the flat film's two faces' distance in the first frame and the given
+#: thickness (px, or this fraction of it) before every frame is flagged poor_fit (figure flat_film): the top
+#: face (the mid plane every height is measured from) is then in doubt
+_FILM_TOL_PX, _FILM_TOL = 1.0, 0.05
 #: rows of the base the walls are followed down, as fractions of the well depth (more rows than
 #: find_walls' default, which must also work with a guessed depth)
 _STRIP = (0.1, 0.8)
@@ -273,6 +277,9 @@ class SilhouetteTracer:
             if not (np.isfinite(l0_px) and l0_px > 1.0):
                 raise ChamberNotFound("the flat film's lower face over the well is not seen: pass the chamber "
                                       "(its membrane thickness)")
+        else:  # the flat film's two faces must be the membrane's thickness apart: else the top face is off
+            seen = _film_thickness(d, w.top_row, w.left, w.right, float(l0_px))
+            self.film_mismatch = float(abs(seen - l0_px)) if np.isfinite(seen) else np.inf
         self.l0 = float(l0_px)
         if depth_px is None:
             depth_px = self._depth(d, w, w.top_row + self.l0)
@@ -292,6 +299,7 @@ class SilhouetteTracer:
         r0, r1 = self._reg_rows
         self._reg_ref = img[r0:r1]
         self.prev = None
+        self.film_mismatch = getattr(self, "film_mismatch", 0.0)  # px (0: l0 measured from these faces)
 
     # ---------------------------------------------------------------------- first frame
     @staticmethod
@@ -520,7 +528,7 @@ class SilhouetteTracer:
         out.height = 0.0
         out.figures.update({"residual_rms": 0.0, "volume_disagreement": 0.0, "gap_length": 0.0,
                             "edge_jumps": 0.0, "edge_lost": 0.0})
-        out.flag, out.flag_figure, out.flag_value = "ok", "", np.nan
+        out.flag, out.flag_figure, out.flag_value = self._flag(out.figures)
         out.ok, out.mode, out.geometry = True, "flat", g
         return out
 
@@ -568,8 +576,10 @@ class SilhouetteTracer:
 
     def _flag(self, fig):
         st = self.settings
+        fig.setdefault("flat_film", self.film_mismatch)
         checks = [
             ("fractured", "gap_length", fig.get("gap_length", 0.0) > st.gap_flag),
+            ("poor_fit", "flat_film", self.film_mismatch > max(_FILM_TOL_PX, _FILM_TOL * self.l0)),
             ("poor_fit", "low_dome", fig.get("low_dome", np.inf) < _LOW_DOME_PX),
             ("poor_fit", "edge_lost", fig.get("edge_lost", 0.0) > _LOST_FLAG),
             ("poor_fit", "edge_jumps", fig.get("edge_jumps", 0.0) > _JUMP_FLAG),

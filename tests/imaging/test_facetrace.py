@@ -212,3 +212,15 @@ def test_end_to_end_permeability_on_optics_looks(name):
     measured = PreStretch(ds.attrs["prestretch_c1"], ds.attrs["prestretch_c2"])
     fit = fit_permeability([ok], PDMS, model="double_exponential", lambda_pre=measured)
     assert fit.p_at_rest == pytest.approx(DoubleExponential.PDMS(1.0), rel=0.05, abs=0)
+
+
+def test_a_wrong_membrane_thickness_flags_every_frame(edge_dark):
+    """A Chamber whose l0 (26 um) disagrees with the flat film's two faces (20 um apart): the top face, the
+    mid plane every height is measured from, is in doubt -- every frame poor_fit (flat_film), none silently ok."""
+    a, h, _ = (edge_dark.truth.attrs[k] for k in ("chamber_radius", "chamber_depth", "membrane_thickness"))
+    ds = extract(edge_dark.frames, pixel_size=0.8e-6, chamber=Chamber(a, h, 26e-6, 3000.0), progress=False,
+                 frame_interval=600.0)
+    assert ds.attrs["tracer"] == "silhouette"
+    assert list(ds.flag.values) == ["poor_fit"] * len(VT)
+    assert set(ds.flag_figure.values) == {"flat_film"}
+    assert float(ds.flag_value[0]) == pytest.approx(6e-6 / 0.8e-6, abs=0.5)
