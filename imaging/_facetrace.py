@@ -68,6 +68,8 @@ _FOOT_PX, _LOW_DOME_PX = 4.0, 8.0
 #: thickness (px, or this fraction of it) before every frame is flagged poor_fit (figure flat_film): the top
 #: face (the mid plane every height is measured from) is then in doubt
 _FILM_TOL_PX, _FILM_TOL = 1.0, 0.05
+#: closest approach (px) of the dome to the field's edge before a frame is poor_fit (field_margin)
+_FIELD_MARGIN_PX = 3.0
 #: rows of the base the walls are followed down, as fractions of the well depth (more rows than
 #: find_walls' default, which must also work with a guessed depth)
 _STRIP = (0.1, 0.8)
@@ -440,8 +442,10 @@ class SilhouetteTracer:
         strength = np.abs(extreme)
         if np.median(strength) < 10.0 * noise:
             return None, None, {"dome_contrast": float(np.median(strength) / max(noise, 1e-12))}
-        sign = float(np.sign(np.median(extreme[strength > 10.0 * noise])))
-        self.polarity = int(-sign)  # +1: the dome darker than the water
+        signs = np.sign(extreme[strength > 10.0 * noise])
+        if self.polarity == 0:  # the dome's sign is learned from the first frame that shows it, then kept
+            self.polarity = int(-np.sign(np.median(signs)))  # +1: the dome darker than the water
+        sign = -float(self.polarity)
         prof = np.clip(sign * v, 0.0, None)
         thr = max(8.0 * noise, 0.2 * float(np.median(prof.max(axis=1))))
         window = int(12.0 / _RAY_STEP)
@@ -453,7 +457,8 @@ class SilhouetteTracer:
                                     mode="nearest")
         jump = found & (np.abs(te - med) > _JUMP_PX)
         good = found & ~jump
-        figs = {"dome_contrast": float(np.median(strength) / max(noise, 1e-12))}
+        figs = {"dome_contrast": float(np.median(strength) / max(noise, 1e-12)),
+                "edge_sign": float(np.mean(signs == sign))}  # rays whose strongest change has the dome's sign
         if good.sum() < 20:
             figs.update({"edge_jumps": float(jump.mean()), "edge_lost": float(1.0 - found.mean())})
             return None, None, figs
@@ -496,8 +501,11 @@ class SilhouetteTracer:
         for ok in found:
             run = 0 if ok else run + 1
             longest = max(longest, run)
+        # the dome reaching the field's edge: part of it is not in the frame
+        cols, rows = w.axis_col + xy[:, 0], w.top_row - xy[:, 1]
+        margin = float(np.min([cols.min(), change.shape[1] - 1 - cols.max(), rows.min()]))
         figs = {"edge_jumps": float(jump.mean()), "edge_lost": float(1.0 - found.mean()),
-                "gap_length": float(longest * _STATION_STEP / self.l0)}
+                "gap_length": float(longest * _STATION_STEP / self.l0), "field_margin": margin}
         og = o[good]
         u, z = xy[good, 0] + og * nu[good], xy[good, 1] + og * nz[good]
         # the feet: within _FOOT_PX of the top face the dome's edge merges with the flat film's lines; the
@@ -580,6 +588,7 @@ class SilhouetteTracer:
         checks = [
             ("fractured", "gap_length", fig.get("gap_length", 0.0) > st.gap_flag),
             ("poor_fit", "flat_film", self.film_mismatch > max(_FILM_TOL_PX, _FILM_TOL * self.l0)),
+            ("poor_fit", "field_margin", fig.get("field_margin", np.inf) < _FIELD_MARGIN_PX),
             ("poor_fit", "low_dome", fig.get("low_dome", np.inf) < _LOW_DOME_PX),
             ("poor_fit", "edge_lost", fig.get("edge_lost", 0.0) > _LOST_FLAG),
             ("poor_fit", "edge_jumps", fig.get("edge_jumps", 0.0) > _JUMP_FLAG),

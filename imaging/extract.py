@@ -491,10 +491,8 @@ def _tracers(first, bulge_direction, chamber_region, settings, route="band", cha
             if own.flag != "ok":
                 try:
                     return [_silhouette_tracer(first, bulge_direction, settings, chamber, p)]
-                except ChamberNotFound as err2:
-                    raise ChamberNotFound(f"the band search finds a chamber but cannot read its own first frame "
-                                          f"({own.flag}, {own.flag_figure}); and by the walls' and film's "
-                                          f"silhouettes: {err2}") from err2
+                except ChamberNotFound:  # the band route it is: its frames are flagged (and a bulged frame
+                    pass  # the chamber was found in is warned about below)
         return [band]
     central = ChamberTracer(first, bulge_direction=bulge_direction, settings=settings)
     g = central.ref
