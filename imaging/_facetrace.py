@@ -595,10 +595,9 @@ class SilhouetteTracer:
             ("poor_fit", "residual_rms", not fig["residual_rms"] <= st.residual_flag),
             ("poor_fit", "volume_disagreement", fig.get("volume_disagreement", 0.0) > st.asymmetry_flag),
         ]
-        for name, key, hit in checks:
-            if hit:
-                return name, key, float(fig[key])
-        return "ok", "", np.nan
+        from osmobulge.imaging.trace import first_flag
+
+        return first_flag(checks, fig)
 
     def _from_points(self, frame, g, out, manual):
         """A manual profile (stored-frame ``(x=col, y=row)`` px) replaces the trace."""

@@ -213,6 +213,14 @@ class FrameTrace:
 
 
 # ---------------------------------------------------------------------------------- helpers
+def first_flag(checks, fig):
+    """``(flag, figure, value)`` of the first ``(flag, figure, hit)`` check that hits, else ``("ok", "", nan)``."""
+    for name, key, hit in checks:
+        if hit:
+            return name, key, float(fig[key])
+    return "ok", "", np.nan
+
+
 # ---------------------------------------------------------------------------------- tracer
 class ChamberTracer:
     """Follows one chamber through a series, one frame at a time (constant memory).
@@ -996,10 +1004,7 @@ class ChamberTracer:
             ("poor_fit", "residual_rms", not fig["residual_rms"] <= st.residual_flag),
             ("poor_fit", "volume_disagreement", fig.get("volume_disagreement", 0.0) > st.asymmetry_flag),
         ]
-        for name, key, hit in checks:
-            if hit:
-                return name, key, float(fig[key])
-        return "ok", "", np.nan
+        return first_flag(checks, fig)
 
     # ---------------------------------------------------------------------- one frame
     def process(self, frame, index=0, *, guide=None, manual=None):
