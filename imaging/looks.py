@@ -66,6 +66,14 @@ HELD_OUT_LOOKS: dict[str, Look] = {
     "ho_small_chamber": Look(Optics(objective_na=0.3), _N, chamber=(100e-6, 110e-6, 20e-6), seed=13),
     "ho_turbid_base": Look(Optics(absorption_base=400.0, n_liquid=1.35), replace(_N, blur_sigma=1.2), seed=14),
     "ho_inverted_defocus": Look(Optics(defocus=10e-6), replace(_N, polarity=-1, bit_depth=8), seed=15),
+    # added 2026-12-03 after ho_turbid_base's failure had prompted a gate (that row is no longer blind): measured
+    # once, blind
+    "ho_blind_1203": Look(
+        Optics(n_elastomer=1.42, n_liquid=1.355, condenser_na=0.12, defocus=-5e-6, halo_strength=0.3,
+               halo_width=4e-6),
+        replace(_N, noise_sigma=0.015, blur_sigma=0.8, illumination_gradient=0.15),
+        chamber=(150e-6, 110e-6, 24e-6), seed=21,
+    ),
 }
 
 
