@@ -50,6 +50,7 @@ from skimage.registration import phase_cross_correlation
 from osmobulge.imaging._chamber import ROTATIONS, ChamberGeometry, ChamberNotFound, FrameView, Line, Well
 from osmobulge.imaging._silhouette import find_walls
 from osmobulge.imaging.geometry import revolution_measures, smooth_profile
+from osmobulge.imaging.trace import FrameTrace, TraceSettings, first_flag
 
 __all__ = ["SilhouetteTracer"]
 
@@ -94,7 +95,13 @@ def _deviation(img):
     return d / max(float(np.percentile(d, 99.5)), 1e-12)
 
 
-def _walls_any_depth(view, l0_px, depth_px):
+def _vertex(a, b, c):
+    """Offset (-0.5..0.5) of the peak of the parabola through three equally spaced values, 0 if not a peak."""
+    den = a - 2 * b + c
+    return float(np.clip(0.5 * (a - c) / den, -0.5, 0.5)) if den < 0 else 0.0
+
+
+def _walls_any_depth(view, l0_px, depth_px, d=None):
     """find_walls, trying well depths of 100, 50, 25 and 200 px when the depth is not known.
 
     A guess is taken when the well's bottom face is found below the rows the
@@ -102,7 +109,7 @@ def _walls_any_depth(view, l0_px, depth_px):
     """
     if depth_px is not None:
         return find_walls(view, l0_px, depth_px=depth_px)
-    d = _deviation(view)
+    d = _deviation(view) if d is None else d
     err = None
     for guess in (100.0, 50.0, 25.0, 200.0):
         try:
@@ -117,14 +124,14 @@ def _walls_any_depth(view, l0_px, depth_px):
     raise err
 
 
-def _plausible(view, w, l0_px, depth_px):
-    """Why the walls ``w`` found in ``view`` are not a chamber seen dome side up ("" if they are).
+def _plausible(d, w, l0_px, depth_px):
+    """Why the walls ``w`` found in a view (its deviation map ``d``) are not a chamber seen dome side up ("" if
+    they are).
 
     The well's bottom face must lie below the walls (at ``depth_px`` within
     15 % when known) and the flat film's lower face over the well ``l0_px``
     below its top face (within 30 %, when known).
     """
-    d = _deviation(view)
     depth = SilhouetteTracer._depth(d, w)
     if not np.isfinite(depth):
         return "no well bottom below the walls"
@@ -146,12 +153,13 @@ def _upright(frame, l0_px, depth_px, known_l0):
     best, errors = None, []
     for name, k in ROTATIONS.items():
         view = np.rot90(np.asarray(frame, float), k)
+        d = _deviation(view)
         try:
-            w = _walls_any_depth(view, l0_px, depth_px)
+            w = _walls_any_depth(view, l0_px, depth_px, d)
         except ChamberNotFound as err:
             errors.append(f"{name}: {err}")
             continue
-        why = _plausible(view, w, l0_px if known_l0 else None, depth_px)
+        why = _plausible(d, w, l0_px if known_l0 else None, depth_px)
         if why:
             errors.append(f"{name}: {why}")
             continue
@@ -184,10 +192,7 @@ def _film_thickness(d, top_row, left, right, guess):
     k = int(np.argmax(prof))
     if prof[k] < 0.1 or k in (0, prof.size - 1):
         return np.nan
-    a, b, c = prof[k - 1], prof[k], prof[k + 1]
-    den = a - 2 * b + c
-    off = 0.5 * (a - c) / den if den < 0 else 0.0
-    return float(r0 + k + np.clip(off, -0.5, 0.5) - top_row)
+    return float(r0 + k + _vertex(prof[k - 1], prof[k], prof[k + 1]) - top_row)
 
 
 def _edge_on_ray(prof, thr, window):
@@ -204,10 +209,7 @@ def _edge_on_ray(prof, thr, window):
     m = lo + int(np.argmax(dp[lo : pk + 1]))
     if m >= dp.size - 1:
         return np.nan, float(prof[pk])
-    a, b, c = dp[m - 1], dp[m], dp[m + 1]
-    den = a - 2 * b + c
-    off = 0.5 * (a - c) / den if den < 0 else 0.0
-    return m + float(np.clip(off, -0.5, 0.5)), float(prof[pk])
+    return m + _vertex(dp[m - 1], dp[m], dp[m + 1]), float(prof[pk])
 
 
 def _thickness(u, z, rim_l, rim_r, l0):
@@ -259,8 +261,6 @@ class SilhouetteTracer:
     route = "silhouette"
 
     def __init__(self, first_frame, *, l0_px=None, depth_px=None, bulge_direction="auto", settings=None):
-        from osmobulge.imaging.trace import TraceSettings
-
         frame = np.asarray(first_frame)
         if frame.ndim != 2:
             raise ValueError(f"frames must be 2-D (H, W), got shape {frame.shape}")
@@ -271,8 +271,9 @@ class SilhouetteTracer:
         else:
             self.k = ROTATIONS[bulge_direction]
             view = np.rot90(np.asarray(frame, float), self.k)
-            w = _walls_any_depth(view, guess, depth_px)
-            why = _plausible(view, w, l0_px, depth_px)
+            d = _deviation(view)
+            w = _walls_any_depth(view, guess, depth_px, d)
+            why = _plausible(d, w, l0_px, depth_px)
             if why:
                 raise ChamberNotFound(f"no chamber seen dome side {bulge_direction}: {why}")
         self.bulge_direction = bulge_direction
@@ -342,8 +343,7 @@ class SilhouetteTracer:
         k = int(np.argmax(cc))
         lag = float(lags[k])
         if 0 < k < lags.size - 1:
-            den = cc[k - 1] - 2 * cc[k] + cc[k + 1]
-            lag += 0.5 * (cc[k - 1] - cc[k + 1]) / den if den < 0 else 0.0
+            lag += _vertex(cc[k - 1], cc[k], cc[k + 1])
         if abs(lag) > _MAX_TILT_PX:
             raise ChamberNotFound(f"the top face is tilted ({lag:+.1f} px from the left of the field to its "
                                   f"right): the silhouette tracer needs an upright view; rotate the series or pick "
@@ -402,8 +402,6 @@ class SilhouetteTracer:
 
     def process(self, frame, index=0, *, guide=None, manual=None):
         """Measure one frame (``guide`` is not needed by this route and ignored); returns a FrameTrace."""
-        from osmobulge.imaging.trace import FrameTrace
-
         frame = np.asarray(frame)
         if frame.shape != self.shape:
             raise ValueError(f"frame {index} has shape {frame.shape}, expected {self.shape}")
@@ -602,8 +600,6 @@ class SilhouetteTracer:
             ("poor_fit", "residual_rms", not fig["residual_rms"] <= st.residual_flag),
             ("poor_fit", "volume_disagreement", fig.get("volume_disagreement", 0.0) > st.asymmetry_flag),
         ]
-        from osmobulge.imaging.trace import first_flag
-
         return first_flag(checks, fig)
 
     def _from_points(self, frame, g, out, manual):
