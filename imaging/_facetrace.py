@@ -96,9 +96,12 @@ def _deviation(img):
 
 
 def _vertex(a, b, c):
-    """Offset (-0.5..0.5) of the peak of the parabola through three equally spaced values, 0 if not a peak."""
-    den = a - 2 * b + c
-    return float(np.clip(0.5 * (a - c) / den, -0.5, 0.5)) if den < 0 else 0.0
+    """Offset (-0.5..0.5) of the peak of the parabola through three equally spaced values, 0 if not a peak
+    (elementwise on arrays)."""
+    den = np.asarray(a - 2 * b + c, float)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        off = np.clip(0.5 * (a - c) / den, -0.5, 0.5)
+    return np.where(den < 0, off, 0.0)
 
 
 def _walls_any_depth(view, l0_px, depth_px, d=None):
@@ -195,21 +198,28 @@ def _film_thickness(d, top_row, left, right, guess):
     return float(r0 + k + _vertex(prof[k - 1], prof[k], prof[k + 1]) - top_row)
 
 
-def _edge_on_ray(prof, thr, window):
-    """Sub-sample index of a ray's outer edge (``prof`` runs from outside in), or nan."""
-    hit = np.flatnonzero(prof > thr)
-    if hit.size == 0:
-        return np.nan, 0.0
-    i0 = int(hit[0])
-    pk = i0 + int(np.argmax(prof[i0 : i0 + window]))
-    lo = max(i0 - 8, 1)
-    if pk <= lo:
-        return np.nan, float(prof[pk])
-    dp = np.gradient(prof[: pk + 2])
-    m = lo + int(np.argmax(dp[lo : pk + 1]))
-    if m >= dp.size - 1:
-        return np.nan, float(prof[pk])
-    return m + _vertex(dp[m - 1], dp[m], dp[m + 1]), float(prof[pk])
+def _edges(prof, thr, window):
+    """Sub-sample index of each ray's outer edge (the rows of ``prof`` run from outside in), nan where none.
+
+    On each row: the first sample above ``thr``, the feature's peak within
+    ``window`` samples of it, and on its outer flank (from 8 samples before the
+    first one to the peak) the steepest rise, located by a parabola through
+    the gradient.
+    """
+    n, m = prof.shape
+    rows = np.arange(n)
+    above = prof > thr
+    i0 = np.argmax(above, axis=1)
+    idx = np.minimum(i0[:, None] + np.arange(window)[None, :], m - 1)
+    pk = idx[rows, np.argmax(np.take_along_axis(prof, idx, axis=1), axis=1)]
+    lo = np.maximum(i0 - 8, 1)
+    end = np.minimum(pk + 1, m - 1)  # the gradient is taken of the samples up to pk + 1 (one-sided there)
+    dp = np.gradient(prof, axis=1)
+    k = np.arange(m)[None, :]
+    steep = np.argmax(np.where((k >= lo[:, None]) & (k <= pk[:, None]), dp, -np.inf), axis=1)
+    right = np.where(steep + 1 == end, prof[rows, end] - prof[rows, end - 1], dp[rows, np.minimum(steep + 1, m - 1)])
+    out = steep + _vertex(dp[rows, np.maximum(steep - 1, 0)], dp[rows, steep], right)
+    return np.where(~above.any(axis=1) | (pk <= lo) | (steep >= end), np.nan, out)
 
 
 def _thickness(u, z, rim_l, rim_r, l0):
@@ -393,12 +403,16 @@ class SilhouetteTracer:
             raise ChamberNotFound(f"the base moved {np.hypot(dx, dy):.0f} px since the first frame (more than "
                                   f"max_drift)")
         w0 = self.walls0
-        # only the rows from a little above the top face down are needed (the local light's Gaussian reaches
-        # 3 sigma = 75 px): a third of the frame's cost
+        # only the rows and columns around the walls' strip are needed (the local light's Gaussian reaches
+        # 3 sigma = 75 px past them): a fifth of the frame's cost
         lo = max(int(w0.top_row + dy) - _WALL_MARGIN, 0)
-        w = find_walls(img[lo:], self.l0, depth_px=self.depth, top_row=w0.top_row + dy - lo, strip=_STRIP,
-                       near=(w0.left + dx, w0.right + dx))
-        return replace(w, top_row=w.top_row + lo, base_row=w.base_row + lo), dx, dy
+        hi = int(w0.base_row + dy + _STRIP[1] * self.depth) + _WALL_MARGIN
+        c0 = max(int(w0.left + dx) - _WALL_MARGIN - 30, 0)
+        c1 = int(w0.right + dx) + _WALL_MARGIN + 30
+        w = find_walls(img[lo:hi, c0:c1], self.l0, depth_px=self.depth, top_row=w0.top_row + dy - lo,
+                       strip=_STRIP, near=(w0.left + dx - c0, w0.right + dx - c0))
+        return replace(w, top_row=w.top_row + lo, base_row=w.base_row + lo, left=w.left + c0,
+                       right=w.right + c0), dx, dy
 
     def process(self, frame, index=0, *, guide=None, manual=None):
         """Measure one frame (``guide`` is not needed by this route and ignored); returns a FrameTrace."""
@@ -417,11 +431,14 @@ class SilhouetteTracer:
         out.geometry, out.drift = g, (dx, dy)
         if manual is not None:
             return self._from_points(frame, g, out, manual)
-        ref = ndimage.shift(self._flat, (dy, dx), order=1, mode="nearest")
-        bg = ndimage.shift(self._bg, (dy, dx), order=1, mode="nearest")
-        change = ndimage.gaussian_filter((img - ref) / bg, _SMOOTH)
+        # the change above the top face (and a few rows of the base): all the dome can be in
+        rows = min(int(np.ceil(w.base_row)) + 12, img.shape[0])
+        pad = min(rows + int(np.ceil(abs(dy))) + 2, img.shape[0])  # (the rows a shift up brings in)
+        ref = ndimage.shift(self._flat[:pad], (dy, dx), order=1, mode="nearest")[:rows]
+        bg = ndimage.shift(self._bg[:pad], (dy, dx), order=1, mode="nearest")[:rows]
+        change = ndimage.gaussian_filter((img[:rows] - ref) / bg, _SMOOTH)
         top = w.top_row
-        water = change[: max(int(top) - 5, 10)]
+        water = change[: max(int(top) - 5, 10) : 2, ::2]  # (every other row and column: plenty for a MAD)
         # (never below 1e-4 of the light: the first frame is its own reference and changes by nothing)
         noise = max(1.4826 * float(np.median(np.abs(water - np.median(water)))), 1e-4)
         u, z, figs = self._outer_face(change, w, noise)
@@ -437,7 +454,10 @@ class SilhouetteTracer:
         t = np.arange(tmax, 0.0, -_RAY_STEP)
         x = w.axis_col + t[None, :] * np.cos(phis)[:, None]
         y = w.top_row - t[None, :] * np.sin(phis)[:, None]
-        v = ndimage.map_coordinates(change, [y.ravel(), x.ravel()], order=1, cval=0.0).reshape(x.shape)
+        # (the samples past the frame's edge are 0: only those that reach into it are interpolated)
+        inside = (y > -1.0) & (x > -1.0) & (x < cols)
+        v = np.zeros(x.shape)
+        v[inside] = ndimage.map_coordinates(change, [y[inside], x[inside]], order=1, cval=0.0)
         return phis, t, v
 
     def _outer_face(self, change, w, noise):
@@ -454,7 +474,7 @@ class SilhouetteTracer:
         prof = np.clip(sign * v, 0.0, None)
         thr = max(8.0 * noise, 0.2 * float(np.median(prof.max(axis=1))))
         window = int(12.0 / _RAY_STEP)
-        edge = np.array([_edge_on_ray(prof[k], thr, window)[0] for k in range(phis.size)])
+        edge = _edges(prof, thr, window)
         te = np.interp(edge, np.arange(t.size), t, left=np.nan, right=np.nan)
         found = np.isfinite(te)
         # jumps: an edge off its neighbours' running median
@@ -497,7 +517,7 @@ class SilhouetteTracer:
                                     cval=0.0).reshape(pu.shape)
         prof = np.clip(sign * v, 0.0, None)
         window = int(12.0 / _NORMAL_STEP)
-        edge = np.array([_edge_on_ray(prof[k], thr, window)[0] for k in range(s.size)])
+        edge = _edges(prof, thr, window)
         o = np.interp(edge, np.arange(offs.size), offs, left=np.nan, right=np.nan)
         found = np.isfinite(o)
         jump = found & (np.abs(o) > _JUMP_PX)
