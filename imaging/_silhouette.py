@@ -8,9 +8,10 @@ frame of the flat membrane:
 
 * the top face of the device (the strongest straight line across the frame,
   of either sign), and
-* each wall as the outer half-level edge of the strongest silhouette zones in
-  a strip of the base below the film, row by row, fitted by a line and read at
-  the base's top surface (``l0`` below the top face).
+* each wall as the outer edge of the strongest silhouette zones in a strip of
+  the base below the film, row by row (half-way between the zone's extreme and
+  the light just outside the wall), fitted by a line and read at the base's top
+  surface (``l0`` below the top face).
 
 It is look-agnostic (``|I - background|``), and not yet used by the tracer:
 tested on the optics looks against their true well radius.
@@ -55,9 +56,12 @@ class SilhouetteWalls:
         return 0.5 * (self.right + self.left)
 
 
-def _half_crossing(prof, peak, step):
-    """Sub-pixel index where ``prof`` falls to half its peak walking from ``peak`` by ``step`` (+-1)."""
-    half = 0.5 * prof[peak]
+def _half_crossing(prof, peak, step, base=0.0):
+    """Sub-pixel index where ``prof`` falls half-way from its peak to ``base``, walking from ``peak`` by
+    ``step`` (+-1)."""
+    half = 0.5 * (prof[peak] + base)
+    if not prof[peak] > half:  # (no fall from the peak to the base)
+        return np.nan
     k = peak
     while 0 <= k + step < prof.size and prof[k + step] > half:
         k += step
@@ -104,11 +108,13 @@ def find_walls(frame, l0_px, *, strip=(0.15, 0.6), depth_px=None, min_width=40, 
         raise ValueError(f"l0_px must be > 0, got {l0_px!r}")
     # relative deviation from the local light level (uneven illumination divides out)
     bg = ndimage.gaussian_filter(img, 25.0, mode="nearest")
-    d = np.abs(img - bg) / np.maximum(bg, 1e-6 * max(float(bg.max()), 1e-30))
+    sd = (img - bg) / np.maximum(bg, 1e-6 * max(float(bg.max()), 1e-30))
+    d = np.abs(sd)
     scale = np.percentile(d, 99.5)
     if scale <= 1e-9:  # relative deviation: nothing but rounding
         raise ChamberNotFound("the frame is uniform: no top face or walls to find")
     d /= scale
+    sd /= scale
     if top_row is None:
         top_row = _top_face(d, l0_px)
     base_row = top_row + l0_px
@@ -130,7 +136,7 @@ def find_walls(frame, l0_px, *, strip=(0.15, 0.6), depth_px=None, min_width=40, 
             peaks.append(c0 + int(np.argmax(col_score[c0:c1])))
     else:
         peaks = _strongest(col_score, img.shape[1], min_width)
-    return _fit_walls(d, peaks, r0, r1, top_row, base_row)
+    return _fit_walls(sd, peaks, r0, r1, top_row, base_row)
 
 
 def _top_face(d, l0_px):
@@ -166,18 +172,32 @@ def _strongest(col_score, width, min_width):
     return peaks
 
 
-def _fit_walls(d, peaks, r0, r1, top_row, base_row):
-    """Each wall's outer half-level edge row by row, fitted by a line and read at ``base_row``."""
+def _fit_walls(sd, peaks, r0, r1, top_row, base_row):
+    """Each wall's outer half-level edge row by row, fitted by a line and read at ``base_row``.
+
+    ``sd``: the signed relative deviation from the local light.  The level is
+    half-way between the silhouette zone's extreme and the light just outside
+    the wall (4-12 px out): the local light, a mean over the zone as well,
+    lies between them, so the level is not half of the deviation's peak.
+    """
     cl, cr = sorted(peaks)
     rows = np.arange(r0, r1)
     left, right = [], []
     for k in range(rows.size):
-        prof = d[rows[k]]
-        # the wall's dark zone lies inside the well: its outer edge is the wall
-        pl = cl - 3 + int(np.argmax(prof[cl - 3 : cl + 4]))
-        pr = cr - 3 + int(np.argmax(prof[cr - 3 : cr + 4]))
-        left.append(_half_crossing(prof, pl, -1))
-        right.append(_half_crossing(prof, pr, +1))
+        row = sd[rows[k]]
+        mag = np.abs(row)
+        for c, step, out in ((cl, -1, left), (cr, +1, right)):
+            # the wall's zone lies inside the well: its outer edge is the wall
+            pk = c - 3 + int(np.argmax(mag[c - 3 : c + 4]))
+            prof = np.sign(row[pk]) * row
+            e = _half_crossing(prof, pk, step)
+            if np.isfinite(e):
+                lo, hi = sorted((int(round(e)) + 4 * step, int(round(e)) + 12 * step))
+                outside = prof[max(lo, 0) : max(hi + 1, 0)]
+                if outside.size >= 4:
+                    e2 = _half_crossing(prof, pk, step, base=float(np.median(outside)))
+                    e = e2 if np.isfinite(e2) else e
+            out.append(e)
     left, right = np.asarray(left), np.asarray(right)
     fits, res = [], []
     for u in (left, right):

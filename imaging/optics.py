@@ -177,8 +177,23 @@ def transmission(theta, optics: Optics) -> np.ndarray:
 # --------------------------------------------------------------------------------------
 # optical path of the scene
 # --------------------------------------------------------------------------------------
-def _chord(radius, u):
-    return 2.0 * np.sqrt(np.clip(radius * radius - u * u, 0.0, None))
+def _chord(radius, u, du=None):
+    """Chord ``2 sqrt(R^2 - u^2)`` of a circle of radius ``R`` at ``u``; with ``du``, its mean over the sample
+    ``u +- du/2`` (exact) within two samples of the silhouette ``|u| = R``, so a silhouette between two
+    samples is where it is, not at the nearer one (further out the midpoint value is the mean to 0.3 %)."""
+    r = np.broadcast_to(np.asarray(radius, float), np.shape(u))
+    out = 2.0 * np.sqrt(np.clip(r * r - u * u, 0.0, None))
+    if du is None:
+        return out
+    near = (np.abs(np.abs(u) - r) < 2.0 * du) & (r > 0)
+    rn, un = r[near], u[near]
+
+    def integral(t):  # int_0^t 2 sqrt(R^2 - s^2) ds, t clipped to +-R
+        tc = np.clip(t, -rn, rn)
+        return tc * np.sqrt(np.clip(rn * rn - tc * tc, 0.0, None)) + rn * rn * np.arcsin(np.clip(tc / rn, -1, 1))
+
+    out[near] = (integral(un + 0.5 * du) - integral(un - 0.5 * du)) / du
+    return out
 
 
 def _faces(r, z, t, a, l0):
@@ -219,7 +234,7 @@ def _below(level, w, dw):
     return np.clip((level - w) / dw + 0.5, 0.0, 1.0)
 
 
-def optical_path(u, w, chambers, a, h, l0, optics: Optics, dw=None):
+def optical_path(u, w, chambers, a, h, l0, optics: Optics, dw=None, cover_out=None):
     """OPD against water (m) and the path lengths in film, base and liquid at scene points.
 
     Parameters
@@ -245,29 +260,69 @@ def optical_path(u, w, chambers, a, h, l0, optics: Optics, dw=None):
     top = 0.5 * l0
     in_slab = _below(top, w, dw)  # under the top face
     in_base = _below(-top, w, dw)  # under the film
-    liquid = np.zeros_like(u)
-    shell = np.zeros_like(u)
+    liquid = np.zeros(np.shape(u))
+    shell = np.zeros(np.shape(u))
+    cover = []  # (flat indices, fraction inside, side) of the samples a silhouette crosses
+    uf, wf = np.ravel(u), np.ravel(w)
     for uc, r, z, t, lam in chambers:
-        x = u - uc
         rim = a * lam
-        # the well: radius linear from a (bottom) to a lambda_pre (top face)
-        in_well = in_base - _below(-top - h, w, dw)
-        rw = a + (rim - a) * (np.clip(w, -top - h, -top) + top + h) / h
-        liquid += in_well * _chord(rw, x)
+        # the well: radius linear from a (bottom) to a lambda_pre (top face); only its samples are computed
+        in_well = np.ravel(in_base - _below(-top - h, w, dw))
+        sel = np.flatnonzero(in_well > 0)
+        x, ws = uf[sel] - uc, wf[sel]
+        rw = a + (rim - a) * (np.clip(ws, -top - h, -top) + top + h) / h
+        liquid.flat[sel] += in_well[sel] * _chord(rw, x, dw)
+        if dw is not None:
+            cover.append(_crossing(sel, rw, x, dw))
         if np.max(z) * a <= 1e-3 * l0:  # flat membrane: no dome above the top face
             continue
         inner, outer = _faces(r, z, t, a, l0)
-        ri = _radius_of_height(inner, w, -top, rim)
-        ro = _radius_of_height(outer, w, top, rim)
-        ci = _chord(ri, x)
-        co = _chord(np.maximum(ro, ri), x)
-        liquid += (1.0 - in_base) * ci
-        shell += (1.0 - in_slab) * (co - ci)
+        reach = 0.0 if dw is None else dw
+        sel = np.flatnonzero((wf >= -top - reach) & (wf <= max(np.max(outer[1]), np.max(inner[1])) + reach))
+        x, ws = uf[sel] - uc, wf[sel]
+        # the dome's faces: the chords averaged over the sample's width, and over its height at three
+        # heights (the top of a face between two samples' rows is then not moved to one of them)
+        heights = (ws,) if dw is None else (ws - dw / 3.0, ws, ws + dw / 3.0)
+        ci = co = 0.0
+        for wk in heights:
+            ri = _radius_of_height(inner, wk, -top, rim)
+            ro = np.maximum(_radius_of_height(outer, wk, top, rim), ri)
+            ci = ci + _chord(ri, x, dw) / len(heights)
+            co = co + _chord(ro, x, dw) / len(heights)
+            if dw is not None and wk is ws:
+                cover += [_crossing(sel, ri, x, dw), _crossing(sel, ro, x, dw)]
+        liquid.flat[sel] += (1.0 - np.ravel(in_base)[sel]) * ci
+        shell.flat[sel] += (1.0 - np.ravel(in_slab)[sel]) * (co - ci)
     slab = np.clip(optics.depth - liquid, 0.0, None)
     film_path = shell + (in_slab - in_base) * slab
     base_only = in_base * slab
     opd = (ne - nw) * (film_path + base_only) + (ns - nw) * liquid
+    if cover_out is not None:
+        cover_out.extend(cover)
     return opd, film_path, base_only, liquid
+
+
+def _crossing(sel, radius, x, du):
+    """The samples (flat indices among ``sel``) the silhouette ``|x| = radius`` crosses: their fraction inside
+    the chord zone and the side (+-1) the outside lies on."""
+    f = np.clip((radius - np.abs(x)) / du + 0.5, 0.0, 1.0) * (radius > 0)
+    k = (f > 0) & (f < 1)
+    return sel[k], f[k], np.sign(x[k])
+
+
+def _blend_silhouettes(light, cover):
+    """The samples a silhouette crosses: their inside share takes the first sample inside, the rest the
+    first outside (point samples would put the edge at the nearer sample boundary)."""
+    out = light.copy()
+    for idx, f, side in cover:
+        if idx.size == 0:
+            continue
+        rr, cc = np.unravel_index(idx, light.shape)
+        step = side.astype(int)  # outwards along the columns
+        c_out = np.clip(cc + step, 0, light.shape[1] - 1)
+        c_in = np.clip(cc - step, 0, light.shape[1] - 1)
+        out[rr, cc] = (1.0 - f) * light[rr, c_out] + f * light[rr, c_in]
+    return out
 
 
 # --------------------------------------------------------------------------------------
@@ -284,6 +339,22 @@ def _splat(shape, rows, cols, weight):
         ok = (rr >= 0) & (rr < shape[0]) & (cc >= 0) & (cc < shape[1])
         out += np.bincount((rr[ok] * shape[1] + cc[ok]), weights=(weight * wgt)[ok], minlength=out.size)
     return out.reshape(shape)
+
+
+def _minmod_gradient(f, q, axis):
+    """d f / d (row or col) by the smaller of the one-sided differences (0 where they differ in sign).
+
+    Unlike the central difference it does not reach across a silhouette: the
+    sample just outside a wall or a dome's face keeps a zero slope (the central
+    difference would darken it by half the first inside sample's chord), and the
+    sample the silhouette crosses gets the slope of its own share of the chord.
+    """
+    f = np.moveaxis(f, axis, 1)
+    d = np.diff(f, axis=1) / q
+    fwd = np.concatenate([d, d[:, -1:]], axis=1)
+    bwd = np.concatenate([d[:, :1], d], axis=1)
+    g = np.where(fwd * bwd > 0, np.sign(fwd) * np.minimum(np.abs(fwd), np.abs(bwd)), 0.0)
+    return np.moveaxis(g, 1, axis)
 
 
 def render_optical(shape, to_scene, chambers, a, h, l0, pixel_size, optics: Optics, blur_sigma=0.0):
@@ -309,10 +380,15 @@ def render_optical(shape, to_scene, chambers, a, h, l0, pixel_size, optics: Opti
     pr = (rr + 0.5) / s - 0.5  # sub-sample centres in pixel coordinates
     pc = (cc + 0.5) / s - 0.5
     u, w = to_scene(pc, pr)
-    opd, p_film, p_base, p_liq = optical_path(u, w, chambers, a, h, l0, optics, dw=q)
-    g_row, g_col = np.gradient(opd, q)
+    cover = []
+    opd, p_film, p_base, p_liq = optical_path(u, w, chambers, a, h, l0, optics, dw=q, cover_out=cover)
+    # the slopes: across the columns without reaching over a silhouette (walls, the dome's sides); across the
+    # rows the same above the top face (the dome's top), central at and below it, where the flat faces' lines
+    # are the steps of their area-weighted paths
+    g_row = np.where(w > 0.5 * l0 + 1.5 * q, _minmod_gradient(opd, q, 0), np.gradient(opd, q, axis=0))
+    g_col = _minmod_gradient(opd, q, 1)
     theta = np.hypot(g_row, g_col)
-    light = transmission(theta, optics)
+    light = _blend_silhouettes(transmission(theta, optics), cover)
     absorb = optics.absorption_film * p_film + optics.absorption_base * p_base + optics.absorption_liquid * p_liq
     if np.any(absorb):
         light = light * np.exp(-absorb)
