@@ -44,7 +44,9 @@ microscope sees of the device viewed from the side, in geometric optics:
    around it (``halo_strength`` of the lost light), as phase-contrast-like halos.
 
 The image is computed on an ``oversample``-times finer grid, splatted, blurred and
-block-averaged to pixels.  Pure numerics: arrays in, arrays out.
+block-averaged to pixels; flat faces are area-weighted and silhouettes anti-aliased on that
+grid (sample-averaged chords, minmod slopes, crossed samples blended by their area inside),
+so an edge is where its face is, not at the nearest sub-sample.  Pure numerics: arrays in, arrays out.
 """
 
 from __future__ import annotations
@@ -250,7 +252,12 @@ def optical_path(u, w, chambers, a, h, l0, optics: Optics, dw=None, cover_out=No
         face, the film's lower face, the well's bottom) are then area-weighted
         over it, so a face between two samples is where it is, not at the
         nearer sample (a face exactly on the grid is otherwise moved by up to
-        half a sample).
+        half a sample); and the chords are averaged over a sample of that
+        width near their silhouettes.
+    cover_out : list, optional
+        With ``dw``: extended by one ``(flat indices, fraction inside, outward
+        side +-1)`` per silhouette (each well wall, each dome face) for the
+        samples it crosses, for :func:`_blend_silhouettes`.
 
     Returns
     -------
