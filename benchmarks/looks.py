@@ -12,7 +12,8 @@ the rim disc)), the fraction of frames within it, the median rim-radius bias
 flagged ok but outside the volume or 0.5 px rim tolerance).  The second column is
 the route ``extract`` took (``tracer="auto"``: band or silhouette), the last two
 the render and extraction times per frame.  ``HELD_OUT_LOOKS`` are printed
-apart: they are measured, never tuned on.  A look where the chamber is not found
+apart: they are measured, never tuned on; ``OUTSIDE_LOOKS`` (dark field) last, where
+the row is the refusal.  A look where the chamber is not found
 prints the error instead.
 """
 
@@ -24,7 +25,7 @@ import time
 import numpy as np
 
 from osmobulge.imaging.extract import extract
-from osmobulge.imaging.looks import HELD_OUT_LOOKS, LOOKS, render_look, score
+from osmobulge.imaging.looks import HELD_OUT_LOOKS, LOOKS, OUTSIDE_LOOKS, render_look, score
 from osmobulge.modeling import PreStretch
 from osmobulge.modeling.transport import Chamber
 
@@ -63,6 +64,7 @@ def main():
     groups = [("held-out looks (never tuned on)", HELD_OUT_LOOKS)]
     if not args.held_out_only:
         groups.insert(0, ("presets", LOOKS))
+        groups.append(("outside the method (must be refused with a reason)", OUTSIDE_LOOKS))
     for title, looks in groups:
         print(f"\n## {title}: Vtilde {', '.join(f'{x:.2f}' for x in vt)}\n")
         print(head)

@@ -80,6 +80,31 @@ _WALL_MARGIN = 80
 _STRIP = (0.1, 0.8)
 #: largest difference (px) between the top face's rows at the field's two sides
 _MAX_TILT_PX = 1.0
+#: a background (the frame's median) below this fraction of its brightest pixels (99.9th percentile) is dark:
+#: in bright field, either display polarity, the background is the illumination (0.3-1.3 of the brightest
+#: pixels on the looks); in dark field it is the camera's offset and noise (below 0.01 on the dark_field look)
+_DARK_BACKGROUND = 0.05
+
+
+def dark_background(frame):
+    """The frame's median over its 99.9th percentile, and why the silhouette route refuses it ("" if it does not).
+
+    Dark-field (annular) light reaches the objective only where the faces bend it
+    in, by 20-40 degrees: where those bright zones lie against the faces depends
+    on the apertures, and the renderer's thin-object optics is not valid there,
+    so this route is neither built nor tested for it.
+    """
+    img = np.asarray(frame, float)
+    hi = float(np.percentile(img, 99.9))
+    ratio = float(np.median(img)) / hi if hi > 0 else 1.0
+    if ratio >= _DARK_BACKGROUND:
+        return ratio, ""
+    return ratio, (f"the background is dark ({100 * ratio:.1f} % of the brightest pixels, below "
+                   f"{100 * _DARK_BACKGROUND:.0f} %): a dark-field (or fluorescence) image, which the silhouette "
+                   f"route does not read (it reads transmitted bright field, where the faces bend light out of the "
+                   f"objective; with annular light the bright zones lie inside the faces by an amount the apertures "
+                   f"set); pick the profiles by hand in napari (python -m osmobulge.plugins EXPERIMENT, Profile "
+                   f"picker), or for a filled bright band try tracer='band'")
 
 
 def _relative(img, sigma=25.0):
@@ -275,6 +300,9 @@ class SilhouetteTracer:
         if frame.ndim != 2:
             raise ValueError(f"frames must be 2-D (H, W), got shape {frame.shape}")
         self.settings = settings or TraceSettings()
+        _, dark = dark_background(frame)
+        if dark:
+            raise ChamberNotFound(dark)
         guess = 25.0 if l0_px is None else float(l0_px)
         if bulge_direction == "auto":
             bulge_direction, self.k, w = _upright(frame, guess, depth_px, l0_px is not None)

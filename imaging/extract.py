@@ -491,8 +491,14 @@ def _tracers(first, bulge_direction, chamber_region, settings, route="band", cha
             if own.flag != "ok":
                 try:
                     return [_silhouette_tracer(first, bulge_direction, settings, chamber, p)]
-                except ChamberNotFound:  # the band route it is: its frames are flagged (and a bulged frame
-                    pass  # the chamber was found in is warned about below)
+                except ChamberNotFound as err:  # the band route it is: its frames are flagged (and a bulged
+                    # frame the chamber was found in is warned about below); not on a dark background, which
+                    # neither route reads unless asked (a band found there does not read its own flat frame)
+                    from osmobulge.imaging._facetrace import dark_background
+
+                    if dark_background(first)[1]:
+                        raise ChamberNotFound(f"the band route cannot read its own first frame ({own.flag}), "
+                                              f"and {err}") from err
         return [band]
     central = ChamberTracer(first, bulge_direction=bulge_direction, settings=settings)
     g = central.ref

@@ -5,7 +5,8 @@ Each look is a :class:`Look`: an :class:`~osmobulge.imaging.optics.Optics` (or
 and the chamber and pixel size it is rendered with.  ``LOOKS`` are the presets
 the tracer may be developed on; ``HELD_OUT_LOOKS`` use other indices, halos,
 focus, seeds and chambers and must never be tuned on: they are only measured
-(``benchmarks/imaging.py --looks``).
+(``benchmarks/looks.py``); ``OUTSIDE_LOOKS`` are outside the method (dark
+field): the tracer must refuse them with its reason.
 
 >>> from osmobulge.imaging.looks import render_look
 >>> series = render_look("edge_dark", [0.0, 1.0], shape=(400, 600))  # doctest: +SKIP
@@ -18,7 +19,7 @@ from dataclasses import dataclass, field, replace
 from osmobulge.imaging.optics import Optics
 from osmobulge.imaging.synthetic import REFERENCE_CHAMBER, Nuisances, SyntheticSeries, render_series
 
-__all__ = ["Look", "LOOKS", "HELD_OUT_LOOKS", "render_look"]
+__all__ = ["Look", "LOOKS", "HELD_OUT_LOOKS", "OUTSIDE_LOOKS", "render_look"]
 
 
 @dataclass(frozen=True)
@@ -42,8 +43,6 @@ LOOKS: dict[str, Look] = {
     "edge_bright": Look(Optics(defocus=-12e-6, condenser_na=0.05), _N, note="defocused: bright fringe inside faces"),
     "bright_band": Look(None, Nuisances(blur_sigma=1.0, noise_sigma=0.01, polarity=-1),
                         note="a filled band brighter than the water (a fluorescent or high-index film)"),
-    "dark_field": Look(Optics(condenser_na=0.40, condenser_inner_na=0.30), _N,
-                       note="annular (dark-field) light: faces bright, inside them by an amount set by the optics"),
     "halo": Look(Optics(halo_strength=0.6, halo_width=3e-6), _N, note="halos on faces and walls"),
     "no_grey_step": Look(Optics(condenser_na=0.2), _N, note="well and base at one grey, wider condenser"),
     "defocus": Look(Optics(defocus=15e-6), _N, note="focal plane 15 um off"),
@@ -77,15 +76,28 @@ HELD_OUT_LOOKS: dict[str, Look] = {
 }
 
 
+#: looks outside the method: rendered, refused by the tracer with a reason (never measured, never silently
+#: wrong).  Dark field: the bright zones are light the faces bend *into* the objective by 20-40 degrees, where
+#: the renderer's thin-object deflection (theta = grad OPD) is not valid and where the zone's edge depends on the
+#: apertures (a sphere of radius R, PDMS in water, condenser NA 0.40 and objective 0.25: the deflection falls to
+#: the largest the objective takes, 28 degrees, 0.028 R inside the outer face by the thin-object formula, 0.0055 R
+#: by Snell's law; 8 px against 1.6 px at R = 289 px); the lab images in transmitted bright field.
+OUTSIDE_LOOKS: dict[str, Look] = {
+    "dark_field": Look(Optics(condenser_na=0.40, condenser_inner_na=0.30), _N,
+                       note="annular (dark-field) light: faces bright, inside them by an amount set by the optics"),
+}
+
+
 def render_look(name, vtilde, *, shape=(1024, 1024), **kwargs) -> SyntheticSeries:
     """Render the series ``vtilde`` in the named look (from ``LOOKS`` or ``HELD_OUT_LOOKS``).
 
     Keywords are passed to :func:`~osmobulge.imaging.synthetic.render_series` and
     override the look's (e.g. ``times``, ``lambda_pre``, ``material``).
     """
-    look = LOOKS.get(name) or HELD_OUT_LOOKS.get(name)
+    look = LOOKS.get(name) or HELD_OUT_LOOKS.get(name) or OUTSIDE_LOOKS.get(name)
     if look is None:
-        raise ValueError(f"unknown look {name!r}; choose from {sorted(LOOKS) + sorted(HELD_OUT_LOOKS)}")
+        raise ValueError(f"unknown look {name!r}; choose from "
+                         f"{sorted(LOOKS) + sorted(HELD_OUT_LOOKS) + sorted(OUTSIDE_LOOKS)}")
     args = {
         "chamber": look.chamber,
         "pixel_size": look.pixel_size,

@@ -30,7 +30,11 @@ microscope sees of the device viewed from the side, in geometric optics:
    (``objective_na``) is the transmitted intensity ``T(|theta|)``, an exact
    overlap of discs in direction space.  Rays bent beyond the aperture are lost:
    faces and walls look dark, and with an annular condenser wider than the
-   objective (dark field) only bent light arrives and faces look bright.
+   objective (dark field) only bent light arrives and faces look bright.  The
+   thin-object limit holds for the small deflections bright field is judged on
+   (a ray bent past the objective's edge is lost, however far); dark field
+   collects rays bent by 20-40 degrees near grazing incidence, where it misplaces
+   the bright zones by several px (``osmobulge.imaging.looks.OUTSIDE_LOOKS``).
 3. **Defocus.**  With the focal plane ``defocus`` (m) from the object, each ray is
    imaged displaced by ``defocus * theta`` (its accepted part), so light bent at a
    face piles up beside it: bright and dark fringes that swap sides through focus.

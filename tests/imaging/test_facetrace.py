@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from osmobulge.imaging._chamber import ChamberNotFound
-from osmobulge.imaging._facetrace import SilhouetteTracer
+from osmobulge.imaging._facetrace import SilhouetteTracer, dark_background
 from osmobulge.imaging.extract import extract
 from osmobulge.imaging.looks import LOOKS, render_look, score
 from osmobulge.modeling import PreStretch
@@ -41,6 +41,8 @@ def edge_dark():
                                   "absorbing_band", "film_10um", "film_26um", "uneven_8bit", "coarse_2um"])
 def test_optics_looks_are_measured_within_the_issues_tolerances(name, edge_dark):
     s = edge_dark if name == "edge_dark" else render_look(name, VT, shape=SHAPE, lambda_pre=PRE)
+    # far from the dark-background refusal (0.05): the background is the illumination, either polarity
+    assert dark_background(s.frames[0])[0] > 0.2
     ds = _extract(s)
     assert ds.attrs["tracer"] == "silhouette"
     sc = score(s.truth, ds)
@@ -117,10 +119,13 @@ def test_band_looks_keep_the_band_route_and_silhouette_can_be_forced():
 
 def test_dark_field_is_refused_not_measured():
     s = render_look("dark_field", [0.0, 0.6], shape=(700, 900))
-    with pytest.raises(ChamberNotFound, match="silhouette|wall"):
-        _extract(s, tracer="silhouette")
-    ds = _extract(s)  # the band route finds something, and flags every frame: no silent error
-    assert score(s.truth, ds)["n_silent"] == 0
+    ratio, why = dark_background(s.frames[0])
+    assert ratio < 0.01 and "dark-field" in why
+    for route in ("silhouette", "auto"):  # refused with the reason and the way in, not traced
+        with pytest.raises(ChamberNotFound, match="background is dark.*Profile picker"):
+            _extract(s, tracer=route)
+    ds = _extract(s, tracer="band")  # asked for: the band route finds something, and flags every frame
+    assert score(s.truth, ds)["n_silent"] == 0 and (ds.flag != "ok").all()
 
 
 def test_a_bulged_first_frame_is_refused(edge_dark):

@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from osmobulge.imaging.looks import HELD_OUT_LOOKS, LOOKS, render_look, score
+from osmobulge.imaging.looks import HELD_OUT_LOOKS, LOOKS, OUTSIDE_LOOKS, render_look, score
 from osmobulge.imaging.optics import Optics, _splat, optical_path, transmission
 from osmobulge.imaging.synthetic import Nuisances, render_series
 
@@ -149,8 +149,9 @@ def test_optics_rejects_bad_input():
 
 
 def test_looks_render_and_held_out_is_disjoint():
-    assert not set(LOOKS) & set(HELD_OUT_LOOKS)
-    required = {"absorbing_band", "edge_dark", "edge_bright", "bright_band", "dark_field", "halo", "no_grey_step",
+    assert not set(LOOKS) & set(HELD_OUT_LOOKS) and not set(OUTSIDE_LOOKS) & (set(LOOKS) | set(HELD_OUT_LOOKS))
+    assert "dark_field" in OUTSIDE_LOOKS
+    required = {"absorbing_band", "edge_dark", "edge_bright", "bright_band", "halo", "no_grey_step",
                 "defocus", "inverted", "film_10um", "film_26um", "coarse_2um", "uneven_8bit"}
     assert required <= set(LOOKS)
     s = render_look("edge_dark", [0.0, 1.0], shape=(300, 400), pixel_size=2e-6)
