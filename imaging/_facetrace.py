@@ -328,6 +328,9 @@ class SilhouetteTracer:
         self.l0 = float(l0_px)
         if depth_px is None:
             depth_px = self._depth(d, w, w.top_row + self.l0)
+            if not np.isfinite(depth_px):
+                raise ChamberNotFound("the well's bottom face is not seen below the walls: pass the chamber "
+                                      "(its depth)")
         self.depth = float(depth_px)
         w = find_walls(img, self.l0, depth_px=self.depth, top_row=w.top_row, strip=_STRIP)
         self._check_upright(d, w)

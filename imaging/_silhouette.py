@@ -116,7 +116,7 @@ def find_walls(frame, l0_px, *, strip=(0.15, 0.6), depth_px=None, min_width=40, 
     d /= scale
     sd /= scale
     if top_row is None:
-        top_row = _top_face(d, l0_px)
+        top_row = _top_face(d, l0_px, img)
     base_row = top_row + l0_px
     depth = 100.0 if depth_px is None else float(depth_px)
     r0 = int(np.ceil(base_row + strip[0] * depth))
@@ -139,11 +139,47 @@ def find_walls(frame, l0_px, *, strip=(0.15, 0.6), depth_px=None, min_width=40, 
     return _fit_walls(sd, peaks, r0, r1, top_row, base_row)
 
 
-def _top_face(d, l0_px):
-    """Row of the top face: the row whose |deviation| is large across nearly the whole frame."""
-    # (its 15th percentile; the well's bottom face, as strong, spans only the well)
+def _line_score(img, l0_px):
+    """Per row, how far it stands out, in one direction, from the light both above and below it (15th
+    percentile over the columns).
+
+    A face is a thin line: its light departs from the level on either side and
+    returns to it.  A change of medium across the whole frame (a turbid base
+    below clear water) differs from one side only, and scores 0, however
+    strong; against a Gaussian local light it would be a ramp tens of rows wide
+    that can outscore a faint, blurred face.  Each side's level is the median
+    of ``0.4 l0`` rows starting ``0.55 l0`` away (past the film's other face's
+    reach, short of its distance), on columns averaged in fours.
+    """
+    h, w = img.shape
+    s = img[:, : w - w % 4].reshape(h, -1, 4).mean(axis=2)
+    gap, win = int(round(0.55 * l0_px)), max(int(round(0.4 * l0_px)), 3)
+    med = ndimage.median_filter(s, size=(win, 1), mode="nearest")
+    off = gap + win // 2
+    if off >= h:
+        return np.zeros(h)
+    up = np.r_[np.repeat(med[:1], off, axis=0), med[:-off]]  # the level above each row
+    dn = np.r_[med[off:], np.repeat(med[-1:], off, axis=0)]  # and below it
+    a = s / np.maximum(up, 1e-12) - 1.0
+    b = s / np.maximum(dn, 1e-12) - 1.0
+    r = np.where(a * b > 0, np.minimum(np.abs(a), np.abs(b)), 0.0)
+    return np.percentile(r, 15, axis=1)
+
+
+def _top_face(d, l0_px, img=None):
+    """Row of the top face: the row that stands out as a line across nearly the whole frame.
+
+    The row is the peak of :func:`_line_score` (of ``img``, when given), its
+    centre and extent read on the |deviation|'s row score around it (its 15th
+    percentile over the columns; the well's bottom face, as strong, spans only
+    the well).
+    """
     row_score = np.percentile(d, 15, axis=1)
     top = int(np.argmax(row_score))
+    if img is not None:  # a line, not a step: then the deviation's own peak within 2 rows
+        line = int(np.argmax(_line_score(img, l0_px)))
+        lo = max(line - 2, 0)
+        top = lo + int(np.argmax(row_score[lo : line + 3]))
     if row_score[top] < 0.02:
         raise ChamberNotFound("no straight top face across the frame")
     # its centre: half-level edges of the row score around the peak

@@ -50,6 +50,9 @@ LOOKS: dict[str, Look] = {
     "film_10um": Look(Optics(), _N, chamber=(200e-6, 110e-6, 10e-6), note="10 um film"),
     "film_26um": Look(Optics(), _N, chamber=(200e-6, 110e-6, 26e-6), note="26 um film"),
     "coarse_2um": Look(Optics(), _N, pixel_size=2e-6, note="2 um pixels"),
+    "turbid_base": Look(Optics(absorption_base=500.0), replace(_N, blur_sigma=1.0),
+                        note="a turbid base: a grey step at its top surface, over the well too (the light crosses "
+                             "the base in front of and behind the well)"),
     "uneven_8bit": Look(
         Optics(),
         replace(_N, bit_depth=8, illumination_gradient=0.3, vignetting=0.2, noise_sigma=0.015),
@@ -72,6 +75,13 @@ HELD_OUT_LOOKS: dict[str, Look] = {
                halo_width=4e-6),
         replace(_N, noise_sigma=0.015, blur_sigma=0.8, illumination_gradient=0.15),
         chamber=(150e-6, 110e-6, 24e-6), seed=21,
+    ),
+    # added 2026-12-03 (second) after the top face was made a line, not a step, for ho_turbid_base: measured
+    # once, blind
+    "ho_blind_1203b": Look(
+        Optics(n_elastomer=1.418, n_liquid=1.357, absorption_base=300.0, defocus=6e-6, condenser_na=0.18),
+        replace(_N, noise_sigma=0.012, blur_sigma=0.9, vignetting=0.15),
+        chamber=(180e-6, 110e-6, 22e-6), seed=33,
     ),
 }
 

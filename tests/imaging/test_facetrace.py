@@ -38,7 +38,8 @@ def edge_dark():
 
 
 @pytest.mark.parametrize("name", ["edge_dark", "edge_bright", "halo", "no_grey_step", "defocus", "inverted",
-                                  "absorbing_band", "film_10um", "film_26um", "uneven_8bit", "coarse_2um"])
+                                  "absorbing_band", "film_10um", "film_26um", "uneven_8bit", "coarse_2um",
+                                  "turbid_base"])
 def test_optics_looks_are_measured_within_the_issues_tolerances(name, edge_dark):
     s = edge_dark if name == "edge_dark" else render_look(name, VT, shape=SHAPE, lambda_pre=PRE)
     # far from the dark-background refusal (0.05): the background is the illumination, either polarity

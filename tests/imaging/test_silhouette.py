@@ -86,3 +86,20 @@ def test_rim_radius_unbiased_as_the_wall_moves(p):
         img, _ = _wall_scene(p, lam)
         w = find_walls(img * 6e4, l0 / p, depth_px=h / p)
         assert abs(w.rim_radius - a * lam / p) < 0.12, (lam, w.rim_radius - a * lam / p)
+
+
+def test_the_top_face_is_a_line_not_a_step():
+    """A faint blurred face line above a full-width step of the light (a turbid base): the line is the face."""
+    from scipy import ndimage
+
+    from osmobulge.imaging._silhouette import _top_face
+
+    rows = np.arange(400.0)[:, None]
+    img = np.ones((400, 600)) * np.where(rows < 225.5, 1.0, 0.7)  # the base 30 % darker from row 225.5
+    img = img - 0.15 * np.exp(-0.5 * ((rows - 200.0) / 1.2) ** 2)  # the face: a 15 % line at row 200
+    img = ndimage.gaussian_filter(img, 1.0) + np.random.default_rng(0).normal(0, 0.005, img.shape)
+    bg = ndimage.gaussian_filter(img, 25.0, mode="nearest")
+    d = np.abs(img - bg) / bg
+    d /= np.percentile(d, 99.5)
+    assert abs(_top_face(d, 25.0) - 200.0) > 3  # the deviation's row score alone takes the step's ramp (7.8 px)
+    assert abs(_top_face(d, 25.0, img) - 200.0) < 0.3
