@@ -262,7 +262,10 @@ def extract(
     the reported values are the means of the two halves and their
     disagreement is a quality figure.  :math:`\tilde V = \Delta V/(\pi a^3)`,
     :math:`V/V_0 = 1 + \Delta V/(\pi a^2 h)` (main text Eqn 4), area ratio
-    :math:`A/(\pi a^2)`, :math:`\lambda_{pre} = R/a` (supplement Sec. 5.7).
+    :math:`A/(\pi a^2)`, :math:`\lambda_{pre} = R/R_0` with :math:`R_0` the rim
+    radius measured in the flat frame (supplement Sec. 5.7; attr
+    ``lambda_pre_reference_radius``; a warning when it is more than 2 % off the
+    chamber's ``a``, which Vtilde and V/V0 use).
     """
     if errors not in ERRORS:
         raise ValueError(f"errors must be one of {ERRORS}, got {errors!r}")
@@ -519,6 +522,9 @@ def _tracers(first, bulge_direction, chamber_region, settings, route="band", cha
     return [t for _, t in sorted(found, key=lambda x: x[0])]
 
 
+#: relative difference between the flat frame's measured rim radius and the chamber's radius a above which
+#: extract warns (Vtilde uses a, lambda_pre the measured radius)
+RIM_MISMATCH = 0.02
 #: first-frame dome height, as a fraction of the rim radius, above which extract warns (the first frame
 #: must show the flat membrane; a first frame at Vtilde 0.05, height 0.1 a, still measures within 0.2 %)
 FIRST_FRAME_HEIGHT = 0.2
@@ -599,7 +605,8 @@ _PER_CHAMBER = {  # name: (units or None, long name)
     "prestretch_c1": ("1", "pre-stretch c1 of lambda_pre = 1 + c1 Vtilde + c2 Vtilde^2 (supplement Sec. 5.7)"),
     "prestretch_c2": ("1", "pre-stretch c2 of lambda_pre = 1 + c1 Vtilde + c2 Vtilde^2 (supplement Sec. 5.7)"),
     "prestretch_frames": (None, "frames in the pre-stretch fit"),
-    "reference_radius": ("m", "chamber radius a used for Vtilde, V/V0 and lambda_pre"),
+    "reference_radius": ("m", "chamber radius a used for Vtilde and V/V0"),
+    "lambda_pre_reference_radius": ("m", "rim radius R0 measured in the flat frame: lambda_pre = R/R0"),
     "polarity": (None, "membrane contrast: +1 dark, -1 bright"),
     "blur_sigma_px": ("px", "Gaussian blur of the optics measured in the first frame"),
     "bulge_direction": (None, "direction the dome grows in the image"),
@@ -713,7 +720,17 @@ def _dataset(run, times, p, chamber_attrs, src, settings, bulge_direction, chamb
         a, h, ref_src = tracer.ref.rim_radius * p, tracer.ref.well.depth * p, "image (first frame)"
     vtilde = volume / (np.pi * a**3)
     volume_ratio = 1.0 + volume / (np.pi * a * a * h) if np.isfinite(h) else np.full(n, np.nan)
-    lam = scal["rim_radius"] / a
+    # lambda_pre = R(Vtilde) / R0, R0 the rim radius measured in the flat frame (supplement Sec. 5.7), not the
+    # chamber's nominal a: a well made 2 % wider than drawn would otherwise start at lambda_pre 1.02
+    r0 = float(tracer.ref.rim_radius) * p
+    if not (np.isfinite(r0) and r0 > 0):
+        r0 = float(a)
+    lam = scal["rim_radius"] / r0
+    if ref_src == "chamber" and abs(r0 / a - 1.0) > RIM_MISMATCH:
+        warnings.warn(f"the rim radius measured in the flat frame, {1e6 * r0:.1f} um, differs from the chamber's "
+                      f"radius a = {1e6 * a:.1f} um by {100 * (r0 / a - 1):+.1f} %: lambda_pre is R/R0 with the "
+                      f"measured R0, but Vtilde = dV/(pi a^3) and V/V0 use a (pass the chamber's true radius, or "
+                      f"check the pixel size)", UserWarning, stacklevel=3)
 
     def var(data, units, long_name, dims=("time",), **extra):
         attrs = {"units": units, "long_name": long_name} if units is not None else {"long_name": long_name}
@@ -743,7 +760,7 @@ def _dataset(run, times, p, chamber_attrs, src, settings, bulge_direction, chamb
         "vtilde": var(vtilde, "1", "dimensionless bulge volume dV/(pi a^3) (Eqn 4)"),
         "volume_ratio": var(volume_ratio, "1", "chamber volume ratio V/V0 = 1 + dV/(pi a^2 h) (Eqn 4)"),
         "rim_radius": var(scal["rim_radius"], "m", "rim radius: half the distance between the wall tops"),
-        "lambda_pre": var(lam, "1", "rim pre-stretch R/a (supplement Sec. 5.7)"),
+        "lambda_pre": var(lam, "1", "rim pre-stretch R/R0, R0 the flat frame's rim radius (supplement Sec. 5.7)"),
         "flag": var(flag.astype(str), None, "frame quality: " + "|".join(FLAGS)),
         "flag_figure": var(flag_figure.astype(str), None, "quality figure that set the flag"),
         "flag_value": var(scal["flag_value"], "1", "value of the figure that set the flag (units of that figure)"),
@@ -785,6 +802,7 @@ def _dataset(run, times, p, chamber_attrs, src, settings, bulge_direction, chamb
         "polarity": int(tracer.ref.polarity),
         "blur_sigma_px": float(tracer.blur),
         "reference_radius": float(a),
+        "lambda_pre_reference_radius": float(r0),
         "reference_depth": float(h),
         "reference_source": ref_src,
         "prior_frames": np.array(sorted(priors_px), np.int64) if priors_px else "none",

@@ -373,6 +373,22 @@ def test_a_bad_chamber_choice_is_not_blamed_on_the_first_frame(series):
     assert "flat membrane" not in str(info.value)
 
 
+def test_lambda_pre_is_against_the_measured_flat_rim_not_the_nominal_radius():
+    """lambda_pre = R(Vtilde)/R0 with R0 measured (supplement Sec. 5.7): a well 3 % wider than the chamber says."""
+    from dataclasses import replace as _replace
+
+    s = render_series([0.0, 1.0, 2.0], lambda_pre=lam, nuisances=Nuisances(noise_sigma=0.01), seed=7, **SMALL)
+    nominal = _replace(CH, radius=CH.radius / 1.03)  # the drawing's radius; the well came out 3 % wider
+    with pytest.warns(UserWarning, match=r"differs from the chamber's radius a = 97.1 um by \+3.0 %"):
+        ds = extract(s.frames, pixel_size=1e-6, frame_interval=600.0, chamber=nominal, progress=False)
+    np.testing.assert_allclose(ds.lambda_pre, s.truth.lambda_pre, atol=1e-3)  # R/a would start at 1.03
+    assert ds.attrs["lambda_pre_reference_radius"] == pytest.approx(CH.radius, abs=0.5e-6)
+    assert ds.attrs["reference_radius"] == pytest.approx(nominal.radius)  # Vtilde keeps the chamber's a
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # the true radius: no warning
+        extract(s.frames[:1], pixel_size=1e-6, frame_interval=600.0, chamber=CH, progress=False)
+
+
 def test_a_split_series_is_measured_with_the_first_files_flat_frame(tmp_path):
     """The later file of a split series (its first frame bulged) with reference_frame= the flat first frame.
 
