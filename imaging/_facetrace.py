@@ -50,7 +50,7 @@ from skimage.registration import phase_cross_correlation
 from osmobulge.imaging._chamber import ROTATIONS, ChamberGeometry, ChamberNotFound, FrameView, Line, Well
 from osmobulge.imaging._silhouette import find_walls
 from osmobulge.imaging.geometry import revolution_measures, smooth_profile
-from osmobulge.imaging.trace import FrameTrace, TraceSettings, first_flag
+from osmobulge.imaging.trace import FrameTrace, TraceSettings, first_flag, manual_curve
 
 __all__ = ["SilhouetteTracer"]
 
@@ -655,15 +655,7 @@ class SilhouetteTracer:
 
     def _from_points(self, frame, g, out, manual):
         """A manual profile (stored-frame ``(x=col, y=row)`` px) replaces the trace."""
-        view = FrameView(frame, self.k)
-        pts = np.asarray(manual, float)
-        vx, vy = view.from_frame(pts[:, 1], pts[:, 0])
-        u, z = g.line.coords(np.c_[vx, vy])
-        if u[0] > u[-1]:
-            u, z = u[::-1], z[::-1]
-        _, puz = smooth_profile(np.c_[u, z]).sample(step=1.0)
-        out.u, out.z = puz[:, 0], puz[:, 1]
-        out.points_u, out.points_z = u, z
+        out.points_u, out.points_z, out.u, out.z = manual_curve(FrameView(frame, self.k), g.line, manual)
         out.source = "manual"
         out.residual_rms = 0.0
         m = revolution_measures(out.u, out.z)

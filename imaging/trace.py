@@ -1107,15 +1107,7 @@ class ChamberTracer:
                                                                                             1e-300))
 
     def _from_points(self, view, g, out, manual):
-        pts = np.asarray(manual, float)
-        vx, vy = view.from_frame(pts[:, 1], pts[:, 0])
-        u, z = g.line.coords(np.c_[vx, vy])  # picked in order along the membrane (an overhang is not monotone in u)
-        if u[0] > u[-1]:
-            u, z = u[::-1], z[::-1]
-        spl = smooth_profile(np.c_[u, z])
-        _, puz = spl.sample(step=1.0)
-        out.u, out.z = puz[:, 0], puz[:, 1]
-        out.points_u, out.points_z = u, z
+        out.points_u, out.points_z, out.u, out.z = manual_curve(view, g.line, manual)
         out.source = "manual"
         out.residual_rms = 0.0
         self._measure(out)
@@ -1126,6 +1118,24 @@ class ChamberTracer:
         self._band = np.nan  # its band width is unknown: the next tracking window is the flat band's again
         self._tracking = True
         return out
+
+
+def manual_curve(view, line, manual):
+    """A manual profile in the ``(u, z)`` px of the flat ``line``: the picked points and the curve through them.
+
+    ``manual`` holds stored-frame ``(x=col, y=row)`` px points picked in order
+    along the membrane (an overhang is not monotone in ``u``); ``view`` is the
+    :class:`~osmobulge.imaging._chamber.FrameView` of the traced orientation.
+    Returns the points' ``u, z`` (left rim first) and a smoothing spline
+    through them sampled every px.
+    """
+    pts = np.asarray(manual, float)
+    vx, vy = view.from_frame(pts[:, 1], pts[:, 0])
+    u, z = line.coords(np.c_[vx, vy])
+    if u[0] > u[-1]:
+        u, z = u[::-1], z[::-1]
+    _, puz = smooth_profile(np.c_[u, z]).sample(step=1.0)
+    return u, z, puz[:, 0], puz[:, 1]
 
 
 def trace_series(frames, **kwargs):

@@ -241,3 +241,18 @@ def test_a_wrong_membrane_thickness_flags_every_frame(edge_dark):
     assert list(ds.flag.values) == ["poor_fit"] * len(VT)
     assert set(ds.flag_figure.values) == {"flat_film"}
     assert float(ds.flag_value[0]) == pytest.approx(6e-6 / 0.8e-6, abs=0.5)
+
+
+def test_a_manual_profile_replaces_the_silhouette_trace(edge_dark):
+    """The true mid-surface picked by hand in frame 2: its volume and area, not the trace's (which also holds)."""
+    p = edge_dark.truth.attrs["pixel_size"]
+    t = edge_dark.truth.isel(time=2)
+    cols = np.r_[t.midline_col.values[0][::-1], t.midline_col.values[1][1:]]
+    rows = np.r_[t.midline_row.values[0][::-1], t.midline_row.values[1][1:]]
+    pick = np.c_[cols, rows][::-1] * p  # picked right rim to left: the order along the curve is what counts
+    ds = _extract(edge_dark, manual_profiles={2: pick})
+    assert ds.attrs["tracer"] == "silhouette"
+    assert list(ds.profile_source.values) == ["auto", "auto", "manual", "auto"]
+    assert float(ds.volume[2]) == pytest.approx(float(t.volume), rel=2e-3, abs=0)
+    assert float(ds.area_ratio[2]) == pytest.approx(float(t.area_ratio), rel=2e-3, abs=0)
+    assert list(ds.flag.values) == ["ok"] * 4
