@@ -81,7 +81,7 @@ _STRIP = (0.1, 0.8)
 #: largest difference (px) between the top face's rows at the field's two sides
 _MAX_TILT_PX = 1.0
 #: a background (the frame's median) below this fraction of its brightest pixels (99.9th percentile) is dark:
-#: in bright field, either display polarity, the background is the illumination (0.3-1.3 of the brightest
+#: in bright field, either display polarity, the background is the illumination (0.26-0.96 of the brightest
 #: pixels on the looks); in dark field it is the camera's offset and noise (below 0.01 on the dark_field look)
 _DARK_BACKGROUND = 0.05
 
@@ -129,19 +129,20 @@ def _vertex(a, b, c):
     return np.where(den < 0, off, 0.0)
 
 
-def _walls_any_depth(view, l0_px, depth_px, d=None):
+def _walls_any_depth(view, l0_px, depth_px, d=None, **locate):
     """find_walls, trying well depths of 100, 50, 25 and 200 px when the depth is not known.
 
     A guess is taken when the well's bottom face is found below the rows the
-    walls were searched in (the upper 60 % of the guessed depth).
+    walls were searched in (the upper 60 % of the guessed depth).  ``locate``:
+    find_walls' ``near`` and ``top_near`` (a given rim).
     """
     if depth_px is not None:
-        return find_walls(view, l0_px, depth_px=depth_px)
+        return find_walls(view, l0_px, depth_px=depth_px, **locate)
     d = _deviation(view) if d is None else d
     err = None
     for guess in (100.0, 50.0, 25.0, 200.0):
         try:
-            w = find_walls(view, l0_px, depth_px=guess)
+            w = find_walls(view, l0_px, depth_px=guess, **locate)
         except ChamberNotFound as e:
             err = e
             continue
@@ -196,6 +197,41 @@ def _upright(frame, l0_px, depth_px, known_l0):
     if best is None:
         raise ChamberNotFound("no top face with two wall silhouettes below it in any orientation (" +
                               "; ".join(errors) + ")")
+    return best
+
+
+def _at_rim(frame, rim, l0_px, depth_px, known_l0, bulge_direction):
+    """The orientation, quarter turn and walls of the chamber whose rim is given (stored-frame ``(col, row)`` px
+    of the flat mid-line's two ends at the walls), found within a few px of it.
+
+    With ``bulge_direction="auto"``, the two orientations whose top face runs
+    along the line through the two points are tried and the plausible one with
+    the straighter walls is kept.
+    """
+    pts = np.asarray(rim, float)
+    horizontal = abs(pts[1, 0] - pts[0, 0]) >= abs(pts[1, 1] - pts[0, 1])
+    names = [bulge_direction] if bulge_direction != "auto" else (["up", "down"] if horizontal else
+                                                                 ["left", "right"])
+    best, errors = None, []
+    for name in names:
+        k = ROTATIONS[name]
+        vx, vy = FrameView(frame, k).from_frame(pts[:, 1], pts[:, 0])
+        left, right = sorted(np.asarray(vx, float))
+        view = np.rot90(np.asarray(frame, float), k)
+        d = _deviation(view)
+        try:
+            w = _walls_any_depth(view, l0_px, depth_px, d, near=(left, right),
+                                 top_near=float(np.mean(vy)) - 0.5 * l0_px)
+        except ChamberNotFound as err:
+            errors.append(f"{name}: {err}")
+            continue
+        why = _plausible(d, w, l0_px if known_l0 else None, depth_px)
+        if why:
+            errors.append(f"{name}: {why}")
+        elif best is None or w.rms < best[2].rms:
+            best = (name, k, w)
+    if best is None:
+        raise ChamberNotFound("no chamber at the given rim (" + "; ".join(errors) + ")")
     return best
 
 
@@ -291,11 +327,16 @@ class SilhouetteTracer:
     bulge_direction : {"auto", "up", "down", "left", "right"}
     settings : TraceSettings, optional
         ``max_drift``, ``residual_flag``, ``asymmetry_flag`` and ``gap_flag`` are used.
+    rim : array_like of shape (2, 2), optional
+        The flat membrane's mid-line ends at the two walls, stored-frame
+        ``(col, row)`` px (e.g. the ends of a flat profile picked in napari):
+        the top face and walls are then looked for within a few px of them
+        (``max(l0/2, 4)`` rows, 20 columns) instead of over the frame.
     """
 
     route = "silhouette"
 
-    def __init__(self, first_frame, *, l0_px=None, depth_px=None, bulge_direction="auto", settings=None):
+    def __init__(self, first_frame, *, l0_px=None, depth_px=None, bulge_direction="auto", settings=None, rim=None):
         frame = np.asarray(first_frame)
         if frame.ndim != 2:
             raise ValueError(f"frames must be 2-D (H, W), got shape {frame.shape}")
@@ -304,7 +345,14 @@ class SilhouetteTracer:
         if dark:
             raise ChamberNotFound(dark)
         guess = 25.0 if l0_px is None else float(l0_px)
-        if bulge_direction == "auto":
+        near = None
+        if rim is not None:
+            rim = np.asarray(rim, float)
+            if rim.shape != (2, 2) or not np.all(np.isfinite(rim)):
+                raise ValueError(f"rim must be two finite (col, row) points, shape (2, 2); got shape {rim.shape}")
+            bulge_direction, self.k, w = _at_rim(frame, rim, guess, depth_px, l0_px is not None, bulge_direction)
+            near = (w.left, w.right)
+        elif bulge_direction == "auto":
             bulge_direction, self.k, w = _upright(frame, guess, depth_px, l0_px is not None)
         else:
             self.k = ROTATIONS[bulge_direction]
@@ -332,7 +380,7 @@ class SilhouetteTracer:
                 raise ChamberNotFound("the well's bottom face is not seen below the walls: pass the chamber "
                                       "(its depth)")
         self.depth = float(depth_px)
-        w = find_walls(img, self.l0, depth_px=self.depth, top_row=w.top_row, strip=_STRIP)
+        w = find_walls(img, self.l0, depth_px=self.depth, top_row=w.top_row, strip=_STRIP, near=near)
         self._check_upright(d, w)
         self._check_flat(d, w)
         self.walls0 = w

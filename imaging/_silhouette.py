@@ -72,7 +72,7 @@ def _half_crossing(prof, peak, step, base=0.0):
 
 
 def find_walls(frame, l0_px, *, strip=(0.15, 0.6), depth_px=None, min_width=40, top_row=None,
-               near=None) -> SilhouetteWalls:
+               near=None, top_near=None) -> SilhouetteWalls:
     """Find the top face and the two walls of the central well in a flat, bulge-up frame.
 
     Parameters
@@ -95,6 +95,9 @@ def find_walls(frame, l0_px, *, strip=(0.15, 0.6), depth_px=None, min_width=40, 
     near : (float, float), optional
         Expected wall columns (left, right): the silhouettes are taken within
         ``min_width / 2`` px of them instead of the two strongest.
+    top_near : float, optional
+        Expected row of the top face (a given rim): it is searched within
+        ``max(l0/2, 4)`` px of it instead of over the whole frame.
 
     Raises
     ------
@@ -116,7 +119,7 @@ def find_walls(frame, l0_px, *, strip=(0.15, 0.6), depth_px=None, min_width=40, 
     d /= scale
     sd /= scale
     if top_row is None:
-        top_row = _top_face(d, l0_px, img)
+        top_row = _top_face(d, l0_px, img, near=top_near)
     base_row = top_row + l0_px
     depth = 100.0 if depth_px is None else float(depth_px)
     r0 = int(np.ceil(base_row + strip[0] * depth))
@@ -166,18 +169,24 @@ def _line_score(img, l0_px):
     return np.percentile(r, 15, axis=1)
 
 
-def _top_face(d, l0_px, img=None):
+def _top_face(d, l0_px, img=None, near=None):
     """Row of the top face: the row that stands out as a line across nearly the whole frame.
 
     The row is the peak of :func:`_line_score` (of ``img``, when given), its
     centre and extent read on the |deviation|'s row score around it (its 15th
     percentile over the columns; the well's bottom face, as strong, spans only
-    the well).
+    the well).  ``near``: only rows within ``max(l0/2, 4)`` px of it.
     """
     row_score = np.percentile(d, 15, axis=1)
-    top = int(np.argmax(row_score))
+    allowed = np.ones(row_score.size, bool)
+    if near is not None:
+        reach = max(0.5 * l0_px, 4.0)
+        allowed = np.abs(np.arange(row_score.size) - float(near)) <= reach
+        if not allowed.any():
+            raise ChamberNotFound(f"the given rim's row {near:.0f} is outside the frame")
+    top = int(np.argmax(np.where(allowed, row_score, -np.inf)))
     if img is not None:  # a line, not a step: then the deviation's own peak within 2 rows
-        line = int(np.argmax(_line_score(img, l0_px)))
+        line = int(np.argmax(np.where(allowed, _line_score(img, l0_px), -np.inf)))
         lo = max(line - 2, 0)
         top = lo + int(np.argmax(row_score[lo : line + 3]))
     if row_score[top] < 0.02:

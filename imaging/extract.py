@@ -161,6 +161,7 @@ def extract(
     fit_prestretch=True,
     reference_frame=None,
     tracer="auto",
+    rim=None,
 ) -> xr.Dataset:
     r"""Extract bulge profiles, volumes, areas and rim radii from a micrograph series.
 
@@ -237,6 +238,13 @@ def extract(
         silhouette route when the band route finds no chamber or cannot read
         its own (flat) first frame.  The route
         taken is the ``tracer`` attr.
+    rim : array_like of shape (2, 2), optional
+        The chamber's rim in the flat (first or reference) frame when the
+        automatic search fails: the flat membrane's mid-line ends at the two
+        walls, ``(x, y)`` in m (``x = col * p``, ``y = row * p``; e.g. the
+        ends of a flat profile picked in napari), within a few px.  The
+        silhouette route then measures the top face and walls there instead
+        of searching the frame (``tracer="auto"`` or ``"silhouette"``).
 
     Returns
     -------
@@ -276,6 +284,9 @@ def extract(
     if tracer == "silhouette" and chamber_region is not None:
         raise ValueError("the silhouette tracer reads one chamber (the most central): chamber_region needs "
                          "tracer='band'")
+    if rim is not None and (tracer == "band" or chamber_region is not None):
+        raise ValueError("rim= locates the chamber for the silhouette route: not with tracer='band' or "
+                         "chamber_region (the band route's way in)")
     if not (isinstance(n_profile, int | np.integer) and n_profile >= 11):
         raise ValueError(f"n_profile must be an int >= 11, got {n_profile!r}")
     settings = settings or TraceSettings()
@@ -290,6 +301,12 @@ def extract(
     if not (np.isfinite(p) and p > 0) or times.shape != (n,) or not np.all(np.isfinite(times)):
         raise ValueError("pixel size or frame times unknown: pass pixel_size= (m/px) and frame_interval= (s)")
     chamber_attrs = _chamber_attrs(chamber)
+    rim_px = None
+    if rim is not None:
+        rim_px = np.asarray(rim, float)
+        if rim_px.shape != (2, 2) or not np.all(np.isfinite(rim_px)):
+            raise ValueError(f"rim must be two finite (x, y) points in m, shape (2, 2); got {np.shape(rim)}")
+        rim_px = rim_px / p  # (x=col, y=row) px
     priors_px = {int(k): _points_px(v, p, "priors") for k, v in (priors or {}).items()}
     manual_px = {int(k): _points_px(v, p, "manual_profiles") for k, v in (manual_profiles or {}).items()}
     for name, d in (("priors", priors_px), ("manual_profiles", manual_px)):
@@ -302,7 +319,7 @@ def extract(
     ref_frame, ref_name = _reference(reference_frame, first, p)
     try:
         tracers = _tracers(first if ref_frame is None else ref_frame, bulge_direction, chamber_region, settings,
-                           tracer, chamber, p)
+                           "silhouette" if rim_px is not None else tracer, chamber, p, rim_px)
     except ChamberNotFound as err:  # (not a bad chamber_region: that error says so itself)
         if ref_frame is not None:
             raise ChamberNotFound(f"{err} -- in the reference frame ({ref_name}), which must show the flat "
@@ -461,19 +478,20 @@ def _reference(reference_frame, first, p):
     return frame, name
 
 
-def _silhouette_tracer(first, bulge_direction, settings, chamber, p):
+def _silhouette_tracer(first, bulge_direction, settings, chamber, p, rim=None):
     from osmobulge.imaging._facetrace import SilhouetteTracer
 
     l0 = depth = None
     if chamber is not None:
         l0, depth = float(chamber.thickness) / p, float(chamber.depth) / p
-    return SilhouetteTracer(first, l0_px=l0, depth_px=depth, bulge_direction=bulge_direction, settings=settings)
+    return SilhouetteTracer(first, l0_px=l0, depth_px=depth, bulge_direction=bulge_direction, settings=settings,
+                            rim=rim)
 
 
-def _tracers(first, bulge_direction, chamber_region, settings, route="band", chamber=None, p=None):
+def _tracers(first, bulge_direction, chamber_region, settings, route="band", chamber=None, p=None, rim=None):
     """The tracer of the chosen chamber, or (``"all"``) of every chamber whose two walls are in the field."""
     if route == "silhouette":
-        return [_silhouette_tracer(first, bulge_direction, settings, chamber, p)]
+        return [_silhouette_tracer(first, bulge_direction, settings, chamber, p, rim)]
     if chamber_region != "all":
         try:
             band = ChamberTracer(first, bulge_direction=bulge_direction, chamber_region=chamber_region,
@@ -532,9 +550,10 @@ FIRST_FRAME_HEIGHT = 0.2
 _LOOK_HINT = (". Both searches failed: the band route needs a filled membrane band and a grey step between the "
               "well's liquid and the base; the silhouette route needs an upright view with the two walls' "
               "silhouettes in the base below a straight top face. Ways in: crop to one chamber with "
-              "chamber_region=(col0, col1) (bulge-up view) when several wells confuse the search, pass the chamber "
-              "(its membrane thickness and depth), or pick the profiles by hand in napari (python -m "
-              "osmobulge.plugins EXPERIMENT, Profile picker)")
+              "chamber_region=(col0, col1) (bulge-up view) when several wells confuse the search, give the rim "
+              "(rim=((x_left, y_left), (x_right, y_right)) in m: the flat mid-line's ends at the walls, e.g. of a "
+              "flat profile picked in napari), pass the chamber (its membrane thickness and depth), or pick the "
+              "profiles by hand in napari (python -m osmobulge.plugins EXPERIMENT, Profile picker)")
 
 #: the ``reference_frame`` attr of an extraction whose chamber was found in the source's own first frame
 OWN_FIRST_FRAME = "first frame"

@@ -256,3 +256,28 @@ def test_a_manual_profile_replaces_the_silhouette_trace(edge_dark):
     assert float(ds.volume[2]) == pytest.approx(float(t.volume), rel=2e-3, abs=0)
     assert float(ds.area_ratio[2]) == pytest.approx(float(t.area_ratio), rel=2e-3, abs=0)
     assert list(ds.flag.values) == ["ok"] * 4
+
+
+def test_a_given_rim_is_the_way_in_when_the_search_fails():
+    """A scratch on the cover glass across the field, darker than the top face 60 px above it: the search takes
+    it for the top face and finds no chamber; the rim given within 2 px (its flat mid-line's ends) is measured."""
+    s = render_look("edge_dark", [0.0, 0.6, 2.0], shape=SHAPE, lambda_pre=PRE)
+    t, p = s.truth, s.truth.attrs["pixel_size"]
+    row, col, r = t.attrs["anchor_row"], t.attrs["anchor_col"], float(t.rim_radius[0]) / p
+    rows = np.arange(SHAPE[0], dtype=float)[:, None]
+    scratch = 1.0 - 0.35 * np.exp(-0.5 * ((rows - (row - 60.0)) / 1.5) ** 2)
+    s.frames[:] = np.rint(s.frames * scratch).astype(s.frames.dtype)
+    with pytest.raises(ChamberNotFound, match="give the rim"):
+        _extract(s)
+    rim = np.array([[col - r + 1.5, row - 2.0], [col + r - 1.0, row + 1.0]]) * p  # (x, y) m, picked roughly
+    ds = _extract(s, rim=rim)
+    sc = score(t, ds)
+    assert ds.attrs["tracer"] == "silhouette" and sc["n_flagged"] == 0 and sc["n_silent"] == 0
+    assert np.all(sc["dv_tol"] <= 0.3), sc["dv_tol"]  # (measured 0.10-0.11)
+    assert np.all(np.abs(sc["rim_bias_px"]) < 0.2), sc["rim_bias_px"]  # (measured -0.06..-0.07)
+    with pytest.raises(ChamberNotFound, match="no chamber at the given rim"):
+        _extract(s, rim=rim - np.array([0.0, 200.0]) * p)  # 200 px up, in the water
+    with pytest.raises(ValueError, match="rim= locates"):
+        _extract(s, rim=rim, tracer="band")
+    with pytest.raises(ValueError, match="shape \\(2, 2\\)"):
+        _extract(s, rim=rim[:1])
