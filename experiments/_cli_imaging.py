@@ -66,6 +66,9 @@ def extract(
     reference_frame: Annotated[Path | None, typer.Option(help="Image or series whose first frame shows the flat "
                                                               "membrane, when SOURCE starts bulged (a later file "
                                                               "of a split series: give the first file).")] = None,
+    rim_um: Annotated[str | None, typer.Option(help="When the chamber is not found: its rim in the flat frame, "
+                                                    "'x0,y0,x1,y1' (um, x = col * pixel size, y = row * pixel "
+                                                    "size), the flat mid-line's ends at the two walls.")] = None,
     errors: Annotated[str, typer.Option(help="flag: keep unmeasurable frames flagged; raise: stop.")] = "flag",
     progress: Annotated[bool, typer.Option(help="Show a progress bar.")] = True,
     as_json: Annotated[bool, typer.Option("--json", help="Print the summary as JSON.")] = False,
@@ -90,6 +93,12 @@ def extract(
         raise typer.BadParameter(f"{str(reference_frame)!r} does not exist", param_hint="--reference-frame")
     if all_chambers and chamber_region is not None:
         raise typer.BadParameter("give --chamber-region or --all-chambers, not both", param_hint="--all-chambers")
+    rim = None
+    if rim_um is not None:
+        try:
+            rim = np.array([float(v) for v in rim_um.split(",")]).reshape(2, 2) * 1e-6
+        except ValueError:
+            raise typer.BadParameter(f"{rim_um!r} is not four numbers 'x0,y0,x1,y1' (um)", param_hint="--rim-um") from None
     ch = _chamber(chamber, chamber_radius_um, chamber_depth_um, membrane_thickness_um, concentration_molar)
     try:
         ds = _extract(
@@ -102,6 +111,7 @@ def extract(
             errors=errors,
             progress=progress and not as_json,
             reference_frame=reference_frame,
+            rim=rim,
         )
     except (ValueError, RuntimeError) as err:
         typer.echo(f"error: {err}", err=True)

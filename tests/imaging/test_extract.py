@@ -203,6 +203,11 @@ def test_cli_extract(series, tmp_path):
     assert bad.exit_code != 0 and ".txt" in bad.output
     half = CliRunner().invoke(app, ["extract", str(path), str(out), "--chamber-radius-um", "100"])
     assert half.exit_code != 0 and "membrane-thickness" in half.output
+    rim = CliRunner().invoke(app, ["extract", str(path), str(out), "--rim-um", "1,2,3"])
+    assert rim.exit_code != 0 and "four numbers" in rim.output
+    rim = CliRunner().invoke(app, ["extract", str(path), str(out), "--rim-um", "100,200,300,200",
+                                   "--chamber-region", "0"])
+    assert rim.exit_code == 2 and "rim= locates" in rim.output
     # the later part of the series, with the first frame as the reference
     from osmobulge.imaging.io import write_series
 
