@@ -98,7 +98,8 @@ def extract(
         try:
             rim = np.array([float(v) for v in rim_um.split(",")]).reshape(2, 2) * 1e-6
         except ValueError:
-            raise typer.BadParameter(f"{rim_um!r} is not four numbers 'x0,y0,x1,y1' (um)", param_hint="--rim-um") from None
+            raise typer.BadParameter(f"{rim_um!r} is not four numbers 'x0,y0,x1,y1' (um)",
+                                     param_hint="--rim-um") from None
     ch = _chamber(chamber, chamber_radius_um, chamber_depth_um, membrane_thickness_um, concentration_molar)
     try:
         ds = _extract(
