@@ -82,7 +82,7 @@ class MetadataError(ValueError):
 # ----------------------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class _Key:
-    kind: str  # "str", "number", "int", "date", "bool", "str_or_list", "number_list", "material", "regions"
+    kind: str  # "str", "number", "int", "date", "bool", "str_or_list", "number_list", "material", "regions", "rim"
     required: bool = False
     default: Any = None
     unit: str = ""  # unit as written in the file, for messages
@@ -137,6 +137,10 @@ _SCHEMA: dict[str, dict[str, _Key]] = {
         "reference_frame": _Key("str", doc="When the frames start bulged (a later file of a split series): an "
                                 "image or series file whose first frame shows the flat membrane in the same "
                                 "field (e.g. the first file), relative to the experiment folder."),
+        "rim_px": _Key("rim", unit="px", doc="When the chamber is not found automatically: its rim in the flat "
+                       "frame, [col0, row0, col1, row1], the flat mid-line's ends at the two walls (e.g. the ends "
+                       "of a flat profile picked in napari); the top face and walls are measured within a few px "
+                       "of it (bright-field silhouette route; not with chamber_regions)."),
     },
     "material": {
         "law": _Key("str", required=True, choices=_MATERIAL_LAWS, doc="Constitutive law."),
@@ -264,6 +268,13 @@ def _check_value(where: str, value, key: _Key, problems: list):
             problems.append(f"{where}: the times must be finite and strictly increasing")
             return None
         return tuple(arr)
+    if key.kind == "rim":
+        if (not isinstance(value, list) or len(value) != 4
+                or any(isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v) for v in value)):
+            problems.append(f"{where} = {_fmt(value)}: expected four finite numbers [col0, row0, col1, row1] in "
+                            f"{key.unit}")
+            return None
+        return tuple(float(v) for v in value)
     if key.kind == "regions":
         return _check_regions(where, value, problems)
     raise AssertionError(key.kind)  # pragma: no cover
@@ -326,6 +337,8 @@ class ImagingSpec:
         ``{"name", "rows": (r0, r1), "cols": (c0, c1)}`` in pixels.
     reference_frame : str or None
         The file (as written) whose first frame shows the flat membrane, when the frames start bulged.
+    rim : tuple of 4 float or None
+        ``(col0, row0, col1, row1)`` px: the chamber's rim in the flat frame, when it is not found automatically.
     """
 
     frames: str
@@ -336,6 +349,7 @@ class ImagingSpec:
     bulge_direction: str = "auto"
     chamber_regions: tuple = ()
     reference_frame: str | None = None
+    rim: tuple | None = None
 
 
 @dataclass(frozen=True)
@@ -657,6 +671,9 @@ def validate_metadata(data: dict, base=None, *, check_frames: bool = True, path=
                             f"expected a glob, a file or a folder of {', '.join(FRAME_SUFFIXES)} images")
         elif "timestamps_min" in im and len(files) > 1 and len(im["timestamps_min"]) != len(files):
             problems.append(f"[imaging] timestamps_min: {len(im['timestamps_min'])} times for {len(files)} frame files")
+    if im.get("rim_px") is not None and im.get("chamber_regions"):
+        problems.append("[imaging] rim_px and chamber_regions: the rim locates one chamber in the whole field; "
+                        "give one or the other")
     if "reference_frame" in im and not str(im["reference_frame"]).strip():
         problems.append("[imaging] reference_frame is empty: give a file, or delete the key")
     elif check_frames and "reference_frame" in im:
@@ -687,6 +704,7 @@ def validate_metadata(data: dict, base=None, *, check_frames: bool = True, path=
         bulge_direction=im["bulge_direction"],
         chamber_regions=im["chamber_regions"],
         reference_frame=im.get("reference_frame"),
+        rim=im.get("rim_px"),
     )
     an = values["analysis"]
     analysis = AnalysisSpec(

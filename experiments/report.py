@@ -308,7 +308,7 @@ def plot_prestretch(extraction):
         if (ok & ~good).any():
             ax.plot(x[ok & ~good], y[ok & ~good], "x", ms=5, color="#c22", label="flagged frames (not fitted)")
         ok &= good
-    ax.plot(x[ok], y[ok], "o", ms=4, mfc="none", color="k", label="measured (rim radius / a)")
+    ax.plot(x[ok], y[ok], "o", ms=4, mfc="none", color="k", label="measured (rim radius / flat rim radius)")
     if ok.sum() >= 3:
         try:
             from osmobulge.modeling.prestretch import fit_prestretch
@@ -495,7 +495,8 @@ def write_experiment_report(exp, path) -> Path:
                "Observed V/V0 with each fitted model (the linear-elastic one is fitted up to the dotted "
                "line only); residuals below. Red crosses: frames the fits do not use.")
     rep.h2("Rim pre-stretch")
-    rep.figure(plot_prestretch(extraction), "lambda_pre(Vtilde): rim radius / a with the quadratic through (0, 1) "
+    rep.figure(plot_prestretch(extraction), "lambda_pre(Vtilde): rim radius / the flat frame's, with the quadratic "
+               "through (0, 1) "
                "(supplement Sec 5.7).")
     rep.h2("Instantaneous permeability")
     inst = js.get("instantaneous", {})

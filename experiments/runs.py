@@ -999,6 +999,8 @@ def process_experiment(exp: Experiment, results: Path, *, progress: Callable | N
                   "bulge_direction": im.bulge_direction, "metadata": None, **options}
         if ref_k is not None:
             kwargs["reference_frame"] = ref_k
+        if im.rim is not None:  # (never with chamber_regions: the metadata check says so)
+            kwargs["rim"] = np.reshape(im.rim, (2, 2)) * p
         if per_region[k]:
             kwargs["manual_profiles"] = per_region[k]
         if priors_region[k]:

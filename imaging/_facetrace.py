@@ -92,19 +92,23 @@ def dark_background(frame):
     Dark-field (annular) light reaches the objective only where the faces bend it
     in, by 20-40 degrees: where those bright zones lie against the faces depends
     on the apertures, and the renderer's thin-object optics is not valid there,
-    so this route is neither built nor tested for it.
+    so this route is neither built nor tested for it.  The black level is taken
+    as 0 (a camera offset above ~4 % of full scale passes a dark-field frame,
+    which the route then fails to read and says so); against the darkest
+    pixels instead, an inverted bright-field display (bright faces on a grey
+    background) would look the same as dark field.
     """
     img = np.asarray(frame, float)
-    hi = float(np.percentile(img, 99.9))
-    ratio = float(np.median(img)) / hi if hi > 0 else 1.0
+    hi = float(np.nanpercentile(img, 99.9))
+    ratio = float(np.nanmedian(img)) / hi if hi > 0 else 1.0
     if ratio >= _DARK_BACKGROUND:
         return ratio, ""
     return ratio, (f"the background is dark ({100 * ratio:.1f} % of the brightest pixels, below "
-                   f"{100 * _DARK_BACKGROUND:.0f} %): a dark-field (or fluorescence) image, which the silhouette "
-                   f"route does not read (it reads transmitted bright field, where the faces bend light out of the "
-                   f"objective; with annular light the bright zones lie inside the faces by an amount the apertures "
-                   f"set); pick the profiles by hand in napari (python -m osmobulge.plugins EXPERIMENT, Profile "
-                   f"picker), or for a filled bright band try tracer='band'")
+                   f"{100 * _DARK_BACKGROUND:.0f} %): a dark-field (or fluorescence, or background-subtracted) "
+                   f"image, which the silhouette route does not read (it reads transmitted bright field, where "
+                   f"the faces bend light out of the objective; with annular light the bright zones lie inside "
+                   f"the faces by an amount the apertures set); pick the profiles by hand in napari (python -m "
+                   f"osmobulge.plugins EXPERIMENT, Profile picker), or for a filled bright band try tracer='band'")
 
 
 def _relative(img, sigma=25.0):
@@ -350,6 +354,9 @@ class SilhouetteTracer:
             rim = np.asarray(rim, float)
             if rim.shape != (2, 2) or not np.all(np.isfinite(rim)):
                 raise ValueError(f"rim must be two finite (col, row) points, shape (2, 2); got shape {rim.shape}")
+            if np.hypot(*(rim[1] - rim[0])) < 40:  # (find_walls' narrowest well)
+                raise ValueError(f"the rim's two points are {np.hypot(*(rim[1] - rim[0])):.0f} px apart: they are "
+                                 f"the flat mid-line's ends at the two walls, at least 40 px apart")
             bulge_direction, self.k, w = _at_rim(frame, rim, guess, depth_px, l0_px is not None, bulge_direction)
             near = (w.left, w.right)
         elif bulge_direction == "auto":

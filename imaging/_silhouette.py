@@ -142,31 +142,41 @@ def find_walls(frame, l0_px, *, strip=(0.15, 0.6), depth_px=None, min_width=40, 
     return _fit_walls(sd, peaks, r0, r1, top_row, base_row)
 
 
+#: line score (relative light) below which the top face's row is the deviation's own row score's peak
+_LINE_FLOOR = 0.01
+
+
 def _line_score(img, l0_px):
     """Per row, how far it stands out, in one direction, from the light both above and below it (15th
-    percentile over the columns).
+    percentile over the columns); the best of three film thicknesses, ``l0``, ``l0/2`` and ``l0/4``.
 
     A face is a thin line: its light departs from the level on either side and
     returns to it.  A change of medium across the whole frame (a turbid base
     below clear water) differs from one side only, and scores 0, however
     strong; against a Gaussian local light it would be a ramp tens of rows wide
     that can outscore a faint, blurred face.  Each side's level is the median
-    of ``0.4 l0`` rows starting ``0.55 l0`` away (past the film's other face's
-    reach, short of its distance), on columns averaged in fours.
+    of ``0.4 l`` rows starting ``0.55 l`` away (past the film's other face's
+    reach, short of its distance), on columns averaged in fours.  ``l0`` may be
+    a guess: a film thinner than ``l0/2`` puts the level below its top face in
+    the base, which a turbid base makes darker than the face, so thinner
+    trials are scored too.
     """
     h, w = img.shape
     s = img[:, : w - w % 4].reshape(h, -1, 4).mean(axis=2)
-    gap, win = int(round(0.55 * l0_px)), max(int(round(0.4 * l0_px)), 3)
-    med = ndimage.median_filter(s, size=(win, 1), mode="nearest")
-    off = gap + win // 2
-    if off >= h:
-        return np.zeros(h)
-    up = np.r_[np.repeat(med[:1], off, axis=0), med[:-off]]  # the level above each row
-    dn = np.r_[med[off:], np.repeat(med[-1:], off, axis=0)]  # and below it
-    a = s / np.maximum(up, 1e-12) - 1.0
-    b = s / np.maximum(dn, 1e-12) - 1.0
-    r = np.where(a * b > 0, np.minimum(np.abs(a), np.abs(b)), 0.0)
-    return np.percentile(r, 15, axis=1)
+    best = np.zeros(h)
+    for thick in (l0_px, 0.5 * l0_px, 0.25 * l0_px):
+        gap, win = max(int(round(0.55 * thick)), 2), max(int(round(0.4 * thick)), 3)
+        off = gap + win // 2
+        if off >= h:
+            continue
+        med = ndimage.median_filter(s, size=(win, 1), mode="nearest")
+        up = np.r_[np.repeat(med[:1], off, axis=0), med[:-off]]  # the level above each row
+        dn = np.r_[med[off:], np.repeat(med[-1:], off, axis=0)]  # and below it
+        a = s / np.maximum(up, 1e-12) - 1.0
+        b = s / np.maximum(dn, 1e-12) - 1.0
+        r = np.where(a * b > 0, np.minimum(np.abs(a), np.abs(b)), 0.0)
+        best = np.maximum(best, np.percentile(r, 15, axis=1))
+    return best
 
 
 def _top_face(d, l0_px, img=None, near=None):
@@ -183,14 +193,19 @@ def _top_face(d, l0_px, img=None, near=None):
         reach = max(0.5 * l0_px, 4.0)
         allowed = np.abs(np.arange(row_score.size) - float(near)) <= reach
         if not allowed.any():
-            raise ChamberNotFound(f"the given rim's row {near:.0f} is outside the frame")
+            raise ChamberNotFound(f"the top face the given rim implies ({near:.0f} px into the bulge-up view) is "
+                                  f"outside the frame")
     top = int(np.argmax(np.where(allowed, row_score, -np.inf)))
     if img is not None:  # a line, not a step: then the deviation's own peak within 2 rows
-        line = int(np.argmax(np.where(allowed, _line_score(img, l0_px), -np.inf)))
-        lo = max(line - 2, 0)
-        top = lo + int(np.argmax(row_score[lo : line + 3]))
+        score = np.where(allowed, _line_score(img, l0_px), -np.inf)
+        line = int(np.argmax(score))
+        if score[line] >= _LINE_FLOOR:  # (else no row is a line: the deviation's peak it is)
+            lo = max(line - 2, 0)
+            window = np.where(allowed[lo : line + 3], row_score[lo : line + 3], -np.inf)
+            top = lo + int(np.argmax(window))
     if row_score[top] < 0.02:
-        raise ChamberNotFound("no straight top face across the frame")
+        where = "across the frame" if near is None else f"within {max(0.5 * l0_px, 4.0):.0f} px of the given rim"
+        raise ChamberNotFound(f"no straight top face {where}")
     # its centre: half-level edges of the row score around the peak
     lo_e = _half_crossing(row_score, top, -1)
     hi_e = _half_crossing(row_score, top, +1)

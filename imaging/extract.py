@@ -177,7 +177,8 @@ def extract(
     chamber : Chamber, optional
         :class:`osmobulge.modeling.transport.Chamber` (or any object with
         ``radius``, ``depth``, ``thickness`` in m): gives :math:`a` and :math:`h`
-        for ``vtilde``, ``volume_ratio``, ``area_ratio`` and ``lambda_pre``.
+        for ``vtilde``, ``volume_ratio`` and ``area_ratio`` (``lambda_pre`` is
+        against the rim radius measured in the flat frame).
         Without it, :math:`a` is the rim radius and :math:`h` the well depth
         measured in the first frame.
     frame_interval : float, s, optional
@@ -324,9 +325,13 @@ def extract(
         if ref_frame is not None:
             raise ChamberNotFound(f"{err} -- in the reference frame ({ref_name}), which must show the flat "
                                   f"membrane") from err
+        if "background is dark" in str(err):  # (its reason and way in are the whole story)
+            raise
+        # the ways in when the search ran (not when the rim was given, or one route asked for)
+        hint = _LOOK_HINT if rim_px is None and tracer == "auto" else ""
         raise ChamberNotFound(f"{err} -- the chamber is found in the first frame, which must show the flat membrane "
                          f"(a series that starts with the dome already grown, e.g. the second file of a split "
-                         f"series, needs reference_frame= a frame of the flat membrane){_LOOK_HINT}") from err
+                         f"series, needs reference_frame= a frame of the flat membrane){hint}") from err
     if ref_frame is not None:  # the reference must be flat itself: traced once (by a copy of each tracer)
         import copy
 
@@ -624,8 +629,9 @@ _PER_CHAMBER = {  # name: (units or None, long name)
     "prestretch_c1": ("1", "pre-stretch c1 of lambda_pre = 1 + c1 Vtilde + c2 Vtilde^2 (supplement Sec. 5.7)"),
     "prestretch_c2": ("1", "pre-stretch c2 of lambda_pre = 1 + c1 Vtilde + c2 Vtilde^2 (supplement Sec. 5.7)"),
     "prestretch_frames": (None, "frames in the pre-stretch fit"),
-    "reference_radius": ("m", "chamber radius a used for Vtilde and V/V0"),
+    "reference_radius": ("m", "chamber radius a used for Vtilde, V/V0 and A/A0"),
     "lambda_pre_reference_radius": ("m", "rim radius R0 measured in the flat frame: lambda_pre = R/R0"),
+    "lambda_pre_reference_source": (None, "where R0 comes from"),
     "polarity": (None, "membrane contrast: +1 dark, -1 bright"),
     "blur_sigma_px": ("px", "Gaussian blur of the optics measured in the first frame"),
     "bulge_direction": (None, "direction the dome grows in the image"),
@@ -741,15 +747,17 @@ def _dataset(run, times, p, chamber_attrs, src, settings, bulge_direction, chamb
     volume_ratio = 1.0 + volume / (np.pi * a * a * h) if np.isfinite(h) else np.full(n, np.nan)
     # lambda_pre = R(Vtilde) / R0, R0 the rim radius measured in the flat frame (supplement Sec. 5.7), not the
     # chamber's nominal a: a well made 2 % wider than drawn would otherwise start at lambda_pre 1.02
-    r0 = float(tracer.ref.rim_radius) * p
+    r0, r0_src = float(tracer.ref.rim_radius) * p, "measured (flat frame)"
     if not (np.isfinite(r0) and r0 > 0):
-        r0 = float(a)
+        r0, r0_src = float(a), "chamber radius a (the flat frame's rim not measured)"
+        warnings.warn("the flat frame's rim radius is not measured: lambda_pre is R/a, against the chamber's "
+                      "radius", UserWarning, stacklevel=3)
     lam = scal["rim_radius"] / r0
     if ref_src == "chamber" and abs(r0 / a - 1.0) > RIM_MISMATCH:
         warnings.warn(f"the rim radius measured in the flat frame, {1e6 * r0:.1f} um, differs from the chamber's "
                       f"radius a = {1e6 * a:.1f} um by {100 * (r0 / a - 1):+.1f} %: lambda_pre is R/R0 with the "
-                      f"measured R0, but Vtilde = dV/(pi a^3) and V/V0 use a (pass the chamber's true radius, or "
-                      f"check the pixel size)", UserWarning, stacklevel=3)
+                      f"measured R0, but Vtilde = dV/(pi a^3), V/V0 and A/A0 use a (pass the chamber's true "
+                      f"radius, or check the pixel size)", UserWarning, stacklevel=3)
 
     def var(data, units, long_name, dims=("time",), **extra):
         attrs = {"units": units, "long_name": long_name} if units is not None else {"long_name": long_name}
@@ -822,6 +830,7 @@ def _dataset(run, times, p, chamber_attrs, src, settings, bulge_direction, chamb
         "blur_sigma_px": float(tracer.blur),
         "reference_radius": float(a),
         "lambda_pre_reference_radius": float(r0),
+        "lambda_pre_reference_source": r0_src,
         "reference_depth": float(h),
         "reference_source": ref_src,
         "prior_frames": np.array(sorted(priors_px), np.int64) if priors_px else "none",

@@ -340,3 +340,30 @@ def test_a_later_file_of_a_split_series_with_reference_frame(tmp_path):
     d = _write(tmp_path / "junk", series.frames[4:], name="junk", extra='reference_frame = "../notes.tif"\n')
     res = run_experiment(d, ["process"])
     assert res.status == "invalid" and "reference_frame" in res.error, (res.status, res.error)
+
+
+def test_a_rim_in_the_metadata_locates_the_chamber(tmp_path):
+    """[imaging] rim_px: the process step passes it to extract (silhouette route, measured at the rim given)."""
+    from osmobulge.imaging.looks import LOOKS
+    from osmobulge.imaging.synthetic import render_series
+
+    look = LOOKS["edge_dark"]
+    s = render_series([0.0, 0.5, 1.0], chamber=CHAMBER, pixel_size=P, shape=(200, 260), times=np.arange(3) * DT,
+                      optics=look.optics, nuisances=look.nuisances, seed=4)
+    t = s.truth
+    row, col, r = t.attrs["anchor_row"], t.attrs["anchor_col"], float(t["rim_radius"][0]) / P
+    rim = f"rim_px = [{col - r + 1.0:.1f}, {row - 1.0:.1f}, {col + r:.1f}, {row + 1.0:.1f}]\n"
+    d = _write(tmp_path / "rim", s.frames, name="rim", extra=rim)
+    out = run_experiment(d, ["process"])
+    assert out.status == "ok", out.error
+    ds = xr.load_dataset(d / "results" / "extraction.nc", engine="h5netcdf")
+    assert ds.attrs["tracer"] == "silhouette" and (ds["flag"].values == "ok").all()
+    tol = np.maximum(0.03 * t["volume"].values, 0.5 * P * np.pi * t["rim_radius"].values ** 2)
+    assert np.all(np.abs(ds["volume"].values - t["volume"].values) <= tol)
+    assert np.all(np.abs(ds["rim_radius"].values - t["rim_radius"].values) <= 0.5 * P)
+    for bad, why in (("rim_px = [1, 2, 3]", "four finite numbers"),
+                     ('rim_px = [1, 2, 3, 4]\nchamber_regions = [{ name = "c", rows = [0, 160], cols = [0, 220] }]',
+                      "rim_px and chamber_regions")):
+        e = _write(tmp_path / f"bad{len(why)}", s.frames, name="bad", extra=bad + "\n")
+        res = run_experiment(e, ["process"])
+        assert res.status == "invalid" and why in res.error, (res.status, res.error)

@@ -281,3 +281,5 @@ def test_a_given_rim_is_the_way_in_when_the_search_fails():
         _extract(s, rim=rim, tracer="band")
     with pytest.raises(ValueError, match="shape \\(2, 2\\)"):
         _extract(s, rim=rim[:1])
+    with pytest.raises(ValueError, match="px apart"):  # both points on one wall
+        _extract(s, rim=np.array([rim[0], rim[0] + np.array([10.0, 0.0]) * p]))
