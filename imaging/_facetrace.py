@@ -495,8 +495,14 @@ class SilhouetteTracer:
         hi = int(w0.base_row + dy + _STRIP[1] * self.depth) + _WALL_MARGIN
         c0 = max(int(w0.left + dx) - _WALL_MARGIN - 30, 0)
         c1 = int(w0.right + dx) + _WALL_MARGIN + 30
+        hi, c1 = min(hi, img.shape[0]), min(c1, img.shape[1])
+        # the local light: the flat frame's, moved by the drift to the pixel (it varies over tens of px; the
+        # walls' half level lies between the zone's extreme and the light just outside, whatever its scale)
+        rows = np.clip(np.arange(lo, hi) - int(round(dy)), 0, img.shape[0] - 1)
+        cols = np.clip(np.arange(c0, c1) - int(round(dx)), 0, img.shape[1] - 1)
         w = find_walls(img[lo:hi, c0:c1], self.l0, depth_px=self.depth, top_row=w0.top_row + dy - lo,
-                       strip=_STRIP, near=(w0.left + dx - c0, w0.right + dx - c0))
+                       strip=_STRIP, near=(w0.left + dx - c0, w0.right + dx - c0),
+                       light=self._bg[np.ix_(rows, cols)])
         return replace(w, top_row=w.top_row + lo, base_row=w.base_row + lo, left=w.left + c0,
                        right=w.right + c0), dx, dy
 

@@ -72,7 +72,7 @@ def _half_crossing(prof, peak, step, base=0.0):
 
 
 def find_walls(frame, l0_px, *, strip=(0.15, 0.6), depth_px=None, min_width=40, top_row=None,
-               near=None, top_near=None) -> SilhouetteWalls:
+               near=None, top_near=None, light=None) -> SilhouetteWalls:
     """Find the top face and the two walls of the central well in a flat, bulge-up frame.
 
     Parameters
@@ -98,6 +98,9 @@ def find_walls(frame, l0_px, *, strip=(0.15, 0.6), depth_px=None, min_width=40, 
     top_near : float, optional
         Expected row of the top face (a given rim): it is searched within
         ``max(l0/2, 4)`` px of it instead of over the whole frame.
+    light : ndarray of shape (M, N), optional
+        The local light level when known (a later frame of a series: the flat
+        frame's, moved by the drift); default the frame's Gaussian of 25 px.
 
     Raises
     ------
@@ -110,7 +113,9 @@ def find_walls(frame, l0_px, *, strip=(0.15, 0.6), depth_px=None, min_width=40, 
     if not (np.isfinite(l0_px) and l0_px > 0):
         raise ValueError(f"l0_px must be > 0, got {l0_px!r}")
     # relative deviation from the local light level (uneven illumination divides out)
-    bg = ndimage.gaussian_filter(img, 25.0, mode="nearest")
+    bg = ndimage.gaussian_filter(img, 25.0, mode="nearest") if light is None else np.asarray(light, float)
+    if bg.shape != img.shape:
+        raise ValueError(f"light has shape {bg.shape}, the frame {img.shape}")
     sd = (img - bg) / np.maximum(bg, 1e-6 * max(float(bg.max()), 1e-30))
     d = np.abs(sd)
     scale = np.percentile(d, 99.5)
