@@ -177,27 +177,32 @@ def _plausible(d, w, l0_px, depth_px):
     return ""
 
 
-def _upright(frame, l0_px, depth_px, known_l0):
-    """The quarter turn whose view shows a chamber dome side up (walls below a top face), and its walls.
-
-    Of the orientations where the walls are found and the chamber is
-    plausible (:func:`_plausible`), the one with the straightest walls.
-    """
+def _straightest(frame, names, l0_px, depth_px, known_l0, locate=None):
+    """Of the orientations ``names`` where the walls are found (``locate(k)``: find_walls' ``near`` and
+    ``top_near`` in the view of quarter turn ``k``) and the chamber is plausible (:func:`_plausible`), the one
+    with the straightest walls, as ``(name, k, walls)`` (None if none), and why each other one is not."""
     best, errors = None, []
-    for name, k in ROTATIONS.items():
+    for name in names:
+        k = ROTATIONS[name]
         view = np.rot90(np.asarray(frame, float), k)
         d = _deviation(view)
         try:
-            w = _walls_any_depth(view, l0_px, depth_px, d)
+            w = _walls_any_depth(view, l0_px, depth_px, d, **(locate(k) if locate else {}))
         except ChamberNotFound as err:
             errors.append(f"{name}: {err}")
             continue
         why = _plausible(d, w, l0_px if known_l0 else None, depth_px)
         if why:
             errors.append(f"{name}: {why}")
-            continue
-        if best is None or w.rms < best[2].rms:
+        elif best is None or w.rms < best[2].rms:
             best = (name, k, w)
+    return best, errors
+
+
+def _upright(frame, l0_px, depth_px, known_l0):
+    """The quarter turn whose view shows a chamber dome side up (walls below a top face), and its walls: the
+    straightest plausible one (:func:`_straightest`)."""
+    best, errors = _straightest(frame, ROTATIONS, l0_px, depth_px, known_l0)
     if best is None:
         raise ChamberNotFound("no top face with two wall silhouettes below it in any orientation (" +
                               "; ".join(errors) + ")")
@@ -216,24 +221,12 @@ def _at_rim(frame, rim, l0_px, depth_px, known_l0, bulge_direction):
     horizontal = abs(pts[1, 0] - pts[0, 0]) >= abs(pts[1, 1] - pts[0, 1])
     names = [bulge_direction] if bulge_direction != "auto" else (["up", "down"] if horizontal else
                                                                  ["left", "right"])
-    best, errors = None, []
-    for name in names:
-        k = ROTATIONS[name]
+
+    def locate(k):  # the rim in the view: the walls' columns and the top face l0/2 above the mid-line
         vx, vy = FrameView(frame, k).from_frame(pts[:, 1], pts[:, 0])
-        left, right = sorted(np.asarray(vx, float))
-        view = np.rot90(np.asarray(frame, float), k)
-        d = _deviation(view)
-        try:
-            w = _walls_any_depth(view, l0_px, depth_px, d, near=(left, right),
-                                 top_near=float(np.mean(vy)) - 0.5 * l0_px)
-        except ChamberNotFound as err:
-            errors.append(f"{name}: {err}")
-            continue
-        why = _plausible(d, w, l0_px if known_l0 else None, depth_px)
-        if why:
-            errors.append(f"{name}: {why}")
-        elif best is None or w.rms < best[2].rms:
-            best = (name, k, w)
+        return {"near": tuple(sorted(np.asarray(vx, float))), "top_near": float(np.mean(vy)) - 0.5 * l0_px}
+
+    best, errors = _straightest(frame, names, l0_px, depth_px, known_l0, locate)
     if best is None:
         raise ChamberNotFound("no chamber at the given rim (" + "; ".join(errors) + ")")
     return best
