@@ -10,13 +10,17 @@ lines.  :class:`SilhouetteTracer` therefore reads, in each bulge-up frame:
 
 1. **walls and rim** (:func:`osmobulge.imaging._silhouette.find_walls`): the
    top face and the two walls in the first (flat) frame; in later frames the
-   same walls within ``settings.max_drift`` px, the rows registered by phase
-   correlation of the base (walls, well bottom; no dome there) against the
-   first frame;
-2. **the change**: the frame minus the first frame shifted by that drift,
-   relative to the local light (so the flat film, the walls and uneven light
-   cancel, and only what moved is left: the dome);
-3. **the outer face**: along rays from the rim plane's centre, walking in from
+   same walls within ``settings.max_drift`` px, on their strip of the base only,
+   the drift read by phase correlation of the base's row and column profiles
+   (walls, well bottom; no dome there) against the first frame's;
+2. **the change**: the frame minus the first frame moved by that drift,
+   relative to the flat frame's local light (so the flat film, the walls and
+   uneven light cancel, and only what moved is left: the dome), sampled along
+   transects only (:func:`osmobulge.imaging._kernels.sample_transects`) and
+   smoothed along them;
+3. **the outer face**: in a tracked frame, along the normals of the last ok
+   frame's outer face moved on by its last step (a track in doubt is searched
+   instead); else along rays from the rim plane's centre, walking in from
    the frame's edge, the first strong feature (of the dome's own sign; a halo or
    fringe of the other sign is not it) and on its outer flank the steepest rise
    (sub-pixel): the silhouette edge.  Rays whose edge jumps from its
@@ -47,6 +51,7 @@ from scipy import ndimage
 from scipy.spatial import cKDTree
 from skimage.registration import phase_cross_correlation
 
+from osmobulge.imaging._kernels import native_frame, sample_transects
 from osmobulge.imaging._chamber import ROTATIONS, ChamberGeometry, ChamberNotFound, FrameView, Line, Well
 from osmobulge.imaging._silhouette import find_walls
 from osmobulge.imaging.geometry import revolution_measures, smooth_profile
@@ -62,6 +67,11 @@ _RAY_STEP, _SMOOTH = 0.5, 0.7
 _JUMP_PX = 3.0
 #: fraction of rays over the dome whose edge jumped, or that have none, that flags poor_fit
 _JUMP_FLAG, _LOST_FLAG = 0.05, 0.10
+#: vertical transects (columns) the change's noise is measured on
+_NOISE_COLUMNS = 32
+#: reach (px, each side) of the search along the last frame's outer face's normals, and its stations' spacing
+#: (px; samples every _RAY_STEP as on the rays)
+_TRACK_REACH, _TRACK_STATIONS = 30.0, 4.5
 #: station spacing (px) along the outer face for the second pass, and its normals' reach and step (px)
 _STATION_STEP, _NORMAL_REACH, _NORMAL_STEP = 1.5, 8.0, 0.25
 #: height (px) above the top face below which the outer face's edge is not used (the feet), and the
@@ -73,8 +83,9 @@ _FOOT_PX, _LOW_DOME_PX = 4.0, 8.0
 _FILM_TOL_PX, _FILM_TOL = 1.0, 0.05
 #: closest approach (px) of the dome to the field's edge before a frame is poor_fit (field_margin)
 _FIELD_MARGIN_PX = 3.0
-#: rows above the top face kept when a later frame's walls are found (more than 3 sigma of the local light)
-_WALL_MARGIN = 80
+#: columns beside the walls kept when a later frame's walls are found (their zone is inside the well, the light
+#: just outside them 4-12 px out; find_walls looks for them within 20 px of the expected columns)
+_WALL_MARGIN = 40
 #: rows of the base the walls are followed down, as fractions of the well depth (more rows than
 #: find_walls' default, which must also work with a guessed depth)
 _STRIP = (0.1, 0.8)
@@ -122,6 +133,14 @@ def _deviation(img):
     bg = _relative(img)
     d = np.abs(img - bg) / bg
     return d / max(float(np.percentile(d, 99.5)), 1e-12)
+
+
+def _profiles(img):
+    """The mean of ``img`` over its columns and over its rows, each less its own mean: what the drift is read
+    from."""
+    img = np.asarray(img, float)
+    r, c = img.mean(axis=1), img.mean(axis=0)
+    return r - r.mean(), c - c.mean()
 
 
 def _vertex(a, b, c):
@@ -388,13 +407,15 @@ class SilhouetteTracer:
         self.shape = frame.shape
         self.ref = self._geometry(w)
         self.blur = np.nan
-        self._flat = img.astype(np.float32)
-        self._bg = _relative(img).astype(np.float32)
+        self._flat = native_frame(frame)  # (stored orientation: sampled in the view by quarter turn k)
+        self._bg = np.ascontiguousarray(_relative(img), np.float32)  # (in the view)
+        self.view_shape = img.shape
         # the base below the film (walls, well bottom), registered frame to frame; no dome there
-        self._reg_rows = (int(np.ceil(w.base_row + 5)), img.shape[0])
-        r0, r1 = self._reg_rows
-        self._reg_ref = img[r0:r1]
+        self._reg_rows = (int(np.ceil(w.base_row + 5)), min(int(w.base_row + self.depth) + 40, img.shape[0]))
+        self._reg_ref = _profiles(img[slice(*self._reg_rows)])
         self.prev = None
+        self._track = None  # the last ok frame's outer face (u, z), px
+        self.searches = 0  # frames whose outer face was searched for by rays (not tracked)
         self.film_mismatch = getattr(self, "film_mismatch", 0.0)  # px (0: l0 measured from these faces)
 
     # ---------------------------------------------------------------------- first frame
@@ -475,27 +496,27 @@ class SilhouetteTracer:
     # ---------------------------------------------------------------------- one frame
     def _walls(self, img):
         """This frame's walls and its drift (dx, dy) from the first frame."""
-        r0, r1 = self._reg_rows
-        shift, _, _ = phase_cross_correlation(self._reg_ref, img[r0:r1], upsample_factor=20, normalization=None)
-        dy, dx = -float(shift[0]), -float(shift[1])
+        # the drift: the base's row and column profiles (its mean over columns and over rows; the well's bottom
+        # face and the walls) registered against the first frame's, each by phase correlation
+        rows_p, cols_p = _profiles(img[slice(*self._reg_rows)])
+        dy = -float(phase_cross_correlation(self._reg_ref[0], rows_p, upsample_factor=20, normalization=None)[0][0])
+        dx = -float(phase_cross_correlation(self._reg_ref[1], cols_p, upsample_factor=20, normalization=None)[0][0])
         if max(abs(dx), abs(dy)) > self.settings.max_drift:
             raise ChamberNotFound(f"the base moved {np.hypot(dx, dy):.0f} px since the first frame (more than "
                                   f"max_drift)")
         w0 = self.walls0
-        # only the rows and columns around the walls' strip are needed (the local light's Gaussian reaches
-        # 3 sigma = 75 px past them): a fifth of the frame's cost
-        lo = max(int(w0.top_row + dy) - _WALL_MARGIN, 0)
-        hi = int(w0.base_row + dy + _STRIP[1] * self.depth) + _WALL_MARGIN
-        c0 = max(int(w0.left + dx) - _WALL_MARGIN - 30, 0)
-        c1 = int(w0.right + dx) + _WALL_MARGIN + 30
-        hi, c1 = min(hi, img.shape[0]), min(c1, img.shape[1])
+        # only the strip of the base the walls are followed down, and the columns around them
+        top = w0.top_row + dy
+        lo = max(int(top + self.l0 + _STRIP[0] * self.depth) - 2, 0)
+        hi = min(int(top + self.l0 + _STRIP[1] * self.depth) + 3, img.shape[0])
+        c0 = max(int(w0.left + dx) - _WALL_MARGIN, 0)
+        c1 = min(int(w0.right + dx) + _WALL_MARGIN, img.shape[1])
         # the local light: the flat frame's, moved by the drift to the pixel (it varies over tens of px; the
         # walls' half level lies between the zone's extreme and the light just outside, whatever its scale)
         rows = np.clip(np.arange(lo, hi) - int(round(dy)), 0, img.shape[0] - 1)
         cols = np.clip(np.arange(c0, c1) - int(round(dx)), 0, img.shape[1] - 1)
-        w = find_walls(img[lo:hi, c0:c1], self.l0, depth_px=self.depth, top_row=w0.top_row + dy - lo,
-                       strip=_STRIP, near=(w0.left + dx - c0, w0.right + dx - c0),
-                       light=self._bg[np.ix_(rows, cols)])
+        w = find_walls(np.asarray(img[lo:hi, c0:c1], float), self.l0, depth_px=self.depth, top_row=top - lo,
+                       strip=_STRIP, near=(w0.left + dx - c0, w0.right + dx - c0), light=self._bg[np.ix_(rows, cols)])
         return replace(w, top_row=w.top_row + lo, base_row=w.base_row + lo, left=w.left + c0,
                        right=w.right + c0), dx, dy
 
@@ -504,7 +525,7 @@ class SilhouetteTracer:
         frame = np.asarray(frame)
         if frame.shape != self.shape:
             raise ValueError(f"frame {index} has shape {frame.shape}, expected {self.shape}")
-        img = np.rot90(frame.astype(float, copy=False), self.k)
+        img = np.rot90(frame, self.k)  # (a view: only the crops the walls are read on are copied)
         out = FrameTrace(index=index)
         try:
             w, dx, dy = self._walls(img)
@@ -516,38 +537,60 @@ class SilhouetteTracer:
         out.geometry, out.drift = g, (dx, dy)
         if manual is not None:
             return self._from_points(frame, g, out, manual)
-        # the change above the top face (and a few rows of the base): all the dome can be in
-        rows = min(int(np.ceil(w.base_row)) + 12, img.shape[0])
-        pad = min(rows + int(np.ceil(abs(dy))) + 2, img.shape[0])  # (the rows a shift up brings in)
-        ref = ndimage.shift(self._flat[:pad], (dy, dx), order=1, mode="nearest")[:rows]
-        bg = ndimage.shift(self._bg[:pad], (dy, dx), order=1, mode="nearest")[:rows]
-        change = ndimage.gaussian_filter((img[:rows] - ref) / bg, _SMOOTH)
-        top = w.top_row
-        water = change[: max(int(top) - 5, 10) : 2, ::2]  # (every other row and column: plenty for a MAD)
-        # (never below 1e-4 of the light: the first frame is its own reference and changes by nothing)
-        noise = max(1.4826 * float(np.median(np.abs(water - np.median(water)))), 1e-4)
-        u, z, figs = self._outer_face(change, w, noise)
+        frame = native_frame(frame)
+
+        def sample(points, directions, offsets):
+            return self._change(frame, points, directions, offsets, dx, dy)
+
+        noise = self._noise(sample, w)
+        u = z = None
+        if self._track is not None:  # along the normals of the last frame's outer face
+            u, z, figs = self._tracked(sample, w, noise)
+        if u is None:  # the full search: rays from the rim plane's centre
+            self.searches += 1
+            u, z, figs = self._outer_face(sample, w, noise)
         out.figures.update(figs)
         if u is None:  # no dome: flat (the film unchanged) or gone
-            return self._flat_or_gone(change, w, noise, g, out)
+            self._track = None
+            return self._flat_or_gone(sample, w, noise, g, out)
         return self._finish(u, z, w, g, out)
 
-    def _rays(self, change, w):
+    def _change(self, frame, points, directions, offsets, dx, dy):
+        """The change (this frame minus the first frame moved by the drift, over the local light) along
+        transects in the view (``(x, y)`` points, directions, offsets: :func:`sample_transects`), smoothed along
+        them by a Gaussian of ``_SMOOTH`` px; 0 outside the frame."""
+        points = np.asarray(points, float).reshape(-1, 2)
+        cur = sample_transects(frame, self.k, points, directions, offsets)
+        moved = points - np.array([dx, dy])
+        ref = sample_transects(self._flat, self.k, moved, directions, offsets)
+        light = sample_transects(self._bg, 0, moved, directions, offsets)
+        v = (cur - ref) / light
+        v[~np.isfinite(v)] = 0.0
+        step = abs(float(offsets[1] - offsets[0])) if len(offsets) > 1 else 1.0
+        return ndimage.gaussian_filter1d(v, _SMOOTH / step, axis=1, mode="nearest")
+
+    def _noise(self, sample, w):
+        """Noise of the change in the water above the top face (scaled MAD over vertical transects at
+        ``_NOISE_COLUMNS`` columns; the dome, a minority of the samples, included); never below 1e-4 (the first
+        frame is its own reference and changes by nothing)."""
+        rows = max(int(w.top_row) - 5, 10)
+        cols = np.linspace(2.0, self.view_shape[1] - 3.0, _NOISE_COLUMNS)
+        v = sample(np.c_[cols, np.zeros_like(cols)], np.tile([0.0, 1.0], (cols.size, 1)),
+                   np.arange(0.0, rows, _RAY_STEP))
+        return max(1.4826 * float(np.median(np.abs(v - np.median(v)))), 1e-4)
+
+    def _rays(self, sample, w):
         phis = np.linspace(_RAY_MIN, np.pi - _RAY_MIN, _N_RAYS)
-        rows, cols = change.shape
+        rows, cols = self.view_shape
         tmax = float(np.hypot(max(w.axis_col, cols - w.axis_col), w.top_row))
         t = np.arange(tmax, 0.0, -_RAY_STEP)
-        x = w.axis_col + t[None, :] * np.cos(phis)[:, None]
-        y = w.top_row - t[None, :] * np.sin(phis)[:, None]
-        # (the samples past the frame's edge are 0: only those that reach into it are interpolated)
-        inside = (y > -1.0) & (x > -1.0) & (x < cols)
-        v = np.zeros(x.shape)
-        v[inside] = ndimage.map_coordinates(change, [y[inside], x[inside]], order=1, cval=0.0)
+        centre = np.tile([w.axis_col, w.top_row], (phis.size, 1))
+        v = sample(centre, np.c_[np.cos(phis), -np.sin(phis)], t)
         return phis, t, v
 
-    def _outer_face(self, change, w, noise):
+    def _outer_face(self, sample, w, noise):
         """Outer-face points (u, z) from the rays (px from the axis and the top face), or None; figures."""
-        phis, t, v = self._rays(change, w)
+        phis, t, v = self._rays(sample, w)
         extreme = v[np.arange(v.shape[0]), np.argmax(np.abs(v), axis=1)]
         strength = np.abs(extreme)
         if np.median(strength) < 10.0 * noise:
@@ -575,7 +618,37 @@ class SilhouetteTracer:
         u, z = te[good] * np.cos(phis[good]), te[good] * np.sin(phis[good])
         # second pass: along the normals of that curve at even arc length (the rays crowd at a flat dome's
         # pole and leave its rims bare)
-        u, z, more = self._along_normals(change, w, u[::-1], z[::-1], sign, thr)  # left rim -> right rim
+        u, z, more = self._along_normals(sample, w, u[::-1], z[::-1], sign, thr)  # left rim -> right rim
+        figs.update(more)
+        return u, z, figs
+
+    def _tracked(self, sample, w, noise):
+        """Outer-face points (u, z) found along the normals of the last frame's outer face, moved on by its last
+        step (within ``_TRACK_REACH`` px), or None when they are not all there (the full search then runs);
+        figures."""
+        (u0, z0), before = self._track[-1], (self._track[0] if len(self._track) == 2 else None)
+        sign = -float(self.polarity)
+        xy, nu, nz, offs, v = self._normals(sample, w, u0, z0, _TRACK_REACH, sigma=1.0,
+                                            station_step=_TRACK_STATIONS, step=_RAY_STEP, before=before)
+        strength = np.max(np.abs(v), axis=1)
+        prof = np.clip(sign * v, 0.0, None)
+        thr = max(8.0 * noise, 0.2 * float(np.median(prof.max(axis=1))))
+        edge = _edges(prof, thr, int(12.0 / _RAY_STEP))
+        o = np.interp(edge, np.arange(offs.size), offs, left=np.nan, right=np.nan)
+        found = np.isfinite(o)
+        med = ndimage.median_filter(np.where(found, o, 0.0), size=9, mode="nearest")
+        jump = found & (np.abs(o - med) > _JUMP_PX)
+        good = found & ~jump
+        near_end = found & (np.abs(o) > _TRACK_REACH - 2.0)  # (the edge may lie past the reach)
+        figs = {"dome_contrast": float(np.median(strength) / max(noise, 1e-12)),
+                "edge_sign": float(np.mean(np.sign(v[np.arange(v.shape[0]), np.argmax(np.abs(v), axis=1)]) == sign))}
+        if (np.median(strength) < 10.0 * noise or good.mean() < 1.0 - _LOST_FLAG or near_end.mean() > 0.02
+                or good.sum() < 20):
+            return None, None, figs
+        u, z = xy[good, 0] + o[good] * nu[good], xy[good, 1] + o[good] * nz[good]
+        u, z, more = self._along_normals(sample, w, u, z, sign, thr)
+        if more["edge_jumps"] > _JUMP_FLAG or more["edge_lost"] > _LOST_FLAG:  # (a track in doubt: search)
+            return None, None, figs
         figs.update(more)
         return u, z, figs
 
@@ -583,23 +656,37 @@ class SilhouetteTracer:
         """The outer face's points with its feet on the top face at the rim, left rim -> right rim."""
         return np.r_[[[w.left - w.axis_col, 0.0]], np.c_[u, z], [[w.right - w.axis_col, 0.0]]]
 
-    def _along_normals(self, change, w, u, z, sign, thr):
+    def _normals(self, sample, w, u, z, reach, sigma, station_step=_STATION_STEP, step=_NORMAL_STEP, before=None):
+        """Stations every ``station_step`` px along the smoothed curve (spline of scatter ``sigma``) through
+        ``(u, z)`` with its feet, and the change along their normals within ``reach`` px (outside -> inside,
+        every ``step`` px): ``(xy, nu, nz, offsets, profiles)``.
+
+        ``before``: the curve one frame earlier (points ``(u, z)``); each station
+        is then moved on along its normal by its distance from it (the dome
+        keeps its pace: a prediction of the next frame's curve).
+        """
+        spl = smooth_profile(self._feet(w, u, z), sigma=sigma)
+        s, xy = spl.sample(step=station_step)
+        s, xy = s[1:-1], xy[1:-1]  # (not the feet themselves)
+        tang = spl.tangent(s)
+        nu, nz = -tang[:, 1], tang[:, 0]  # outward
+        if before is not None:
+            _, dense = smooth_profile(self._feet(w, *before), sigma=sigma).sample(step=0.5)
+            q = dense[cKDTree(dense).query(xy)[1]]
+            lead = (xy[:, 0] - q[:, 0]) * nu + (xy[:, 1] - q[:, 1]) * nz
+            xy = xy + lead[:, None] * np.c_[nu, nz]
+        offs = np.arange(reach, -reach - 1e-9, -step)  # outside -> inside
+        v = sample(np.c_[w.axis_col + xy[:, 0], w.top_row - xy[:, 1]], np.c_[nu, -nz], offs)
+        return xy, nu, nz, offs, v
+
+    def _along_normals(self, sample, w, u, z, sign, thr):
         """Outer-face edges along the normals of the curve through ``(u, z)``, every 1.5 px; figures.
 
         A station whose edge lies more than ``_JUMP_PX`` off the first curve
         jumped (another fringe, dust) and is dropped; ``edge_lost``: stations
         without an edge; ``gap_length``: their longest run, / l0.
         """
-        spl = smooth_profile(self._feet(w, u, z), sigma=1.0)
-        s, xy = spl.sample(step=_STATION_STEP)
-        s, xy = s[1:-1], xy[1:-1]  # (not the feet themselves)
-        tang = spl.tangent(s)
-        nu, nz = -tang[:, 1], tang[:, 0]  # outward
-        offs = np.arange(_NORMAL_REACH, -_NORMAL_REACH - 1e-9, -_NORMAL_STEP)  # outside -> inside
-        pu = xy[:, 0, None] + offs[None, :] * nu[:, None]
-        pz = xy[:, 1, None] + offs[None, :] * nz[:, None]
-        v = ndimage.map_coordinates(change, [(w.top_row - pz).ravel(), (w.axis_col + pu).ravel()], order=1,
-                                    cval=0.0).reshape(pu.shape)
+        xy, nu, nz, offs, v = self._normals(sample, w, u, z, _NORMAL_REACH, sigma=1.0)
         prof = np.clip(sign * v, 0.0, None)
         window = int(12.0 / _NORMAL_STEP)
         edge = _edges(prof, thr, window)
@@ -613,7 +700,7 @@ class SilhouetteTracer:
             longest = max(longest, run)
         # the dome reaching the field's edge: part of it is not in the frame
         cols, rows = w.axis_col + xy[:, 0], w.top_row - xy[:, 1]
-        margin = float(np.min([cols.min(), change.shape[1] - 1 - cols.max(), rows.min()]))
+        margin = float(np.min([cols.min(), self.view_shape[1] - 1 - cols.max(), rows.min()]))
         figs = {"edge_jumps": float(jump.mean()), "edge_lost": float(1.0 - found.mean()),
                 "gap_length": float(longest * _STATION_STEP / self.l0), "field_margin": margin}
         og = o[good]
@@ -626,11 +713,13 @@ class SilhouetteTracer:
             u, z = u[high], z[high]
         return u, z, figs
 
-    def _flat_or_gone(self, change, w, noise, g, out):
+    def _flat_or_gone(self, sample, w, noise, g, out):
         """A frame without a dome edge: the flat film (volume 0) if its faces are where they were, else gone."""
-        c0, c1 = int(w.axis_col - 0.8 * w.rim_radius), int(w.axis_col + 0.8 * w.rim_radius)
+        cols = np.arange(int(w.axis_col - 0.8 * w.rim_radius), int(w.axis_col + 0.8 * w.rim_radius), dtype=float)
         r0, r1 = int(w.top_row - 3), int(w.base_row + 4)
-        moved = float(np.median(np.max(np.abs(change[r0:r1, c0:c1]), axis=0)))
+        v = sample(np.c_[cols, np.full_like(cols, r0)], np.tile([0.0, 1.0], (cols.size, 1)),
+                   np.arange(0.0, r1 - r0, 0.5))
+        moved = float(np.median(np.max(np.abs(v), axis=1)))
         out.figures["dome_contrast"] = out.figures.get("dome_contrast", 0.0)
         if moved > 10.0 * noise:  # the film's faces changed but no dome rose: no membrane over the well
             out.message = "no dome edge, and the flat film's faces over the well are gone"
@@ -690,6 +779,11 @@ class SilhouetteTracer:
         out.ok, out.mode = True, "silhouette"
         if out.flag == "ok":
             self.prev = out
+            # (the next frame's outer face is searched along the normals of this one's, moved on by as much as it
+            # moved since the last)
+            self._track = ((self._track[-1],) if self._track else ()) + ((u, z),)
+        else:
+            self._track = None
         return out
 
     def _flag(self, fig):

@@ -19,6 +19,7 @@ tested on the optics looks against their true well radius.
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -237,6 +238,46 @@ def _strongest(col_score, width, min_width):
     return peaks
 
 
+def _half_crossings(prof, pk, base=None):
+    """:func:`_half_crossing` of each row of ``prof`` from its ``pk`` walking to higher indices (nan where none).
+
+    ``base``: per row (default 0).
+    """
+    n, m = prof.shape
+    rows = np.arange(n)
+    top = prof[rows, pk]
+    half = 0.5 * (top + (0.0 if base is None else base))
+    k = np.arange(m)[None, :]
+    below = (k > pk[:, None]) & ~(prof > half[:, None])  # (nan stops the walk, as in _half_crossing)
+    j = np.argmax(below, axis=1)
+    ok = (top > half) & below[rows, j]
+    jm = np.maximum(j - 1, 0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        e = jm + (prof[rows, jm] - half) / (prof[rows, jm] - prof[rows, j])
+    return np.where(ok, e, np.nan)
+
+
+def _wall_edges(sd, c):
+    """Per row of ``sd`` (signed deviation, walking outwards to higher indices), the wall's outer half-level edge
+    from its zone's extreme within 3 columns of ``c``: :func:`_fit_walls`' rule, on all the rows at once."""
+    n, m = sd.shape
+    rows = np.arange(n)
+    lo = max(c - 3, 0)
+    pk = lo + np.argmax(np.abs(sd[:, lo : c + 4]), axis=1)
+    prof = np.sign(sd[rows, pk])[:, None] * sd
+    e = _half_crossings(prof, pk)
+    # the light just outside the wall: 4-12 px out
+    idx = np.round(np.nan_to_num(e, nan=-100.0)).astype(int)[:, None] + np.arange(4, 13)[None, :]
+    valid = (idx >= 0) & (idx < m) & np.isfinite(e)[:, None]
+    outside = np.where(valid, prof[rows[:, None], np.clip(idx, 0, m - 1)], np.nan)
+    enough = valid.sum(axis=1) >= 4
+    with np.errstate(invalid="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # (all-nan rows: no edge)
+        base = np.nanmedian(outside, axis=1)
+    e2 = _half_crossings(prof, pk, np.where(enough, base, 0.0))
+    return np.where(enough & np.isfinite(e2), e2, e)
+
+
 def _fit_walls(sd, peaks, r0, r1, top_row, base_row):
     """Each wall's outer half-level edge row by row, fitted by a line and read at ``base_row``.
 
@@ -247,22 +288,11 @@ def _fit_walls(sd, peaks, r0, r1, top_row, base_row):
     """
     cl, cr = sorted(peaks)
     rows = np.arange(r0, r1)
-    left, right = [], []
-    for k in range(rows.size):
-        row = sd[rows[k]]
-        mag = np.abs(row)
-        for c, step, out in ((cl, -1, left), (cr, +1, right)):
-            # the wall's zone lies inside the well: its outer edge is the wall
-            pk = c - 3 + int(np.argmax(mag[c - 3 : c + 4]))
-            prof = np.sign(row[pk]) * row
-            e = _half_crossing(prof, pk, step)
-            if np.isfinite(e):
-                lo, hi = sorted((int(round(e)) + 4 * step, int(round(e)) + 12 * step))
-                outside = prof[max(lo, 0) : max(hi + 1, 0)]
-                if outside.size >= 4:
-                    e2 = _half_crossing(prof, pk, step, base=float(np.median(outside)))
-                    e = e2 if np.isfinite(e2) else e
-            out.append(e)
+    m = sd.shape[1]
+    strip = sd[r0:r1]
+    # the wall's zone lies inside the well: its outer edge is the wall (the left one walked in flipped columns)
+    left = m - 1 - _wall_edges(strip[:, ::-1], m - 1 - cl)
+    right = _wall_edges(strip, cr)
     left, right = np.asarray(left), np.asarray(right)
     fits, res = [], []
     for u in (left, right):

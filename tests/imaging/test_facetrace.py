@@ -283,3 +283,28 @@ def test_a_given_rim_is_the_way_in_when_the_search_fails():
         _extract(s, rim=rim[:1])
     with pytest.raises(ValueError, match="px apart"):  # both points on one wall
         _extract(s, rim=np.array([rim[0], rim[0] + np.array([10.0, 0.0]) * p]))
+
+
+def test_tracked_frames_agree_with_the_full_search():
+    """A series filmed slowly enough to track: after the first dome frames, frames are found along the last outer
+    face's normals (no ray search), and their volumes and rims equal the full search's within a tenth of the
+    tolerance (both against the truth within it)."""
+    vt = np.linspace(0.3, 1.2, 7)
+    s = render_look("edge_dark", np.r_[0.0, vt], shape=SHAPE, lambda_pre=PRE)
+    p = s.truth.attrs["pixel_size"]
+    ch = _chamber(s.truth)
+    kw = dict(l0_px=ch.thickness / p, depth_px=ch.depth / p)
+    tracked, full = SilhouetteTracer(s.frames[0], **kw), SilhouetteTracer(s.frames[0], **kw)
+    rim = s.truth.rim_radius.values[0] / p
+    tol = np.maximum(0.03 * s.truth.volume.values / p**3, 0.5 * np.pi * rim**2)
+    for i, f in enumerate(s.frames):
+        a = tracked.process(f, i)
+        full._track = None  # (never tracked: every frame searched by rays)
+        b = full.process(f, i)
+        assert a.flag == b.flag == "ok"
+        va, vb = (0.5 * (o.volume_left + o.volume_right) for o in (a, b))
+        assert abs(va - vb) < 0.1 * tol[i]
+        assert abs(va - s.truth.volume.values[i] / p**3) < tol[i]
+        assert abs(a.geometry.rim_radius - b.geometry.rim_radius) < 0.01
+    # (the flat frame is searched too: no dome there)
+    assert full.searches == len(s.frames) and tracked.searches <= 3
