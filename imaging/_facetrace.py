@@ -51,8 +51,8 @@ from scipy import ndimage
 from scipy.spatial import cKDTree
 from skimage.registration import phase_cross_correlation
 
-from osmobulge.imaging._kernels import native_frame, sample_transects
 from osmobulge.imaging._chamber import ROTATIONS, ChamberGeometry, ChamberNotFound, FrameView, Line, Well
+from osmobulge.imaging._kernels import native_frame, sample_transects
 from osmobulge.imaging._silhouette import find_walls
 from osmobulge.imaging.geometry import revolution_measures, smooth_profile
 from osmobulge.imaging.trace import FrameTrace, TraceSettings, first_flag, manual_curve
@@ -299,6 +299,27 @@ def _edges(prof, thr, window):
     return np.where(~above.any(axis=1) | (pk <= lo) | (steep >= end), np.nan, out)
 
 
+def _first_edges(v, t, sign, noise):
+    """The outer edge along each profile of ``v`` (rows sampled at ``t`` px, from outside in; the dome's change
+    has sign ``sign``) as a position in ``t`` (nan where none), whether found, whether it jumped (more than
+    ``_JUMP_PX`` off its neighbours' running median), the threshold, and the figures ``dome_contrast`` (median
+    strongest change / noise) and ``edge_sign`` (profiles whose strongest change has the dome's sign)."""
+    extreme = v[np.arange(v.shape[0]), np.argmax(np.abs(v), axis=1)]
+    strength = np.abs(extreme)
+    prof = np.clip(sign * v, 0.0, None)
+    thr = max(8.0 * noise, 0.2 * float(np.median(prof.max(axis=1))))
+    edge = _edges(prof, thr, int(12.0 / abs(float(t[1] - t[0]))))
+    te = np.interp(edge, np.arange(t.size), t, left=np.nan, right=np.nan)
+    found = np.isfinite(te)
+    med = ndimage.median_filter(np.where(found, te, np.nanmedian(te) if found.any() else 0.0), size=9,
+                                mode="nearest")
+    jump = found & (np.abs(te - med) > _JUMP_PX)
+    strong = strength > 10.0 * noise
+    figs = {"dome_contrast": float(np.median(strength) / max(noise, 1e-12)),
+            "edge_sign": float(np.mean(np.sign(extreme[strong]) == sign)) if strong.any() else 0.0}
+    return te, found, jump, thr, figs
+
+
 def _thickness(u, z, rim_l, rim_r, l0):
     r"""The film's thickness along a mid-surface curve (left rim -> right rim), px.
 
@@ -515,7 +536,7 @@ class SilhouetteTracer:
         # walls' half level lies between the zone's extreme and the light just outside, whatever its scale)
         rows = np.clip(np.arange(lo, hi) - int(round(dy)), 0, img.shape[0] - 1)
         cols = np.clip(np.arange(c0, c1) - int(round(dx)), 0, img.shape[1] - 1)
-        w = find_walls(np.asarray(img[lo:hi, c0:c1], float), self.l0, depth_px=self.depth, top_row=top - lo,
+        w = find_walls(img[lo:hi, c0:c1], self.l0, depth_px=self.depth, top_row=top - lo,
                        strip=_STRIP, near=(w0.left + dx - c0, w0.right + dx - c0), light=self._bg[np.ix_(rows, cols)])
         return replace(w, top_row=w.top_row + lo, base_row=w.base_row + lo, left=w.left + c0,
                        right=w.right + c0), dx, dy
@@ -595,23 +616,11 @@ class SilhouetteTracer:
         strength = np.abs(extreme)
         if np.median(strength) < 10.0 * noise:
             return None, None, {"dome_contrast": float(np.median(strength) / max(noise, 1e-12))}
-        signs = np.sign(extreme[strength > 10.0 * noise])
         if self.polarity == 0:  # the dome's sign is learned from the first frame that shows it, then kept
-            self.polarity = int(-np.sign(np.median(signs)))  # +1: the dome darker than the water
+            self.polarity = int(-np.sign(np.median(np.sign(extreme[strength > 10.0 * noise]))))  # +1: darker
         sign = -float(self.polarity)
-        prof = np.clip(sign * v, 0.0, None)
-        thr = max(8.0 * noise, 0.2 * float(np.median(prof.max(axis=1))))
-        window = int(12.0 / _RAY_STEP)
-        edge = _edges(prof, thr, window)
-        te = np.interp(edge, np.arange(t.size), t, left=np.nan, right=np.nan)
-        found = np.isfinite(te)
-        # jumps: an edge off its neighbours' running median
-        med = ndimage.median_filter(np.where(found, te, np.nanmedian(te) if found.any() else 0.0), size=9,
-                                    mode="nearest")
-        jump = found & (np.abs(te - med) > _JUMP_PX)
+        te, found, jump, thr, figs = _first_edges(v, t, sign, noise)
         good = found & ~jump
-        figs = {"dome_contrast": float(np.median(strength) / max(noise, 1e-12)),
-                "edge_sign": float(np.mean(signs == sign))}  # rays whose strongest change has the dome's sign
         if good.sum() < 20:
             figs.update({"edge_jumps": float(jump.mean()), "edge_lost": float(1.0 - found.mean())})
             return None, None, figs
@@ -630,19 +639,10 @@ class SilhouetteTracer:
         sign = -float(self.polarity)
         xy, nu, nz, offs, v = self._normals(sample, w, u0, z0, _TRACK_REACH, sigma=1.0,
                                             station_step=_TRACK_STATIONS, step=_RAY_STEP, before=before)
-        strength = np.max(np.abs(v), axis=1)
-        prof = np.clip(sign * v, 0.0, None)
-        thr = max(8.0 * noise, 0.2 * float(np.median(prof.max(axis=1))))
-        edge = _edges(prof, thr, int(12.0 / _RAY_STEP))
-        o = np.interp(edge, np.arange(offs.size), offs, left=np.nan, right=np.nan)
-        found = np.isfinite(o)
-        med = ndimage.median_filter(np.where(found, o, 0.0), size=9, mode="nearest")
-        jump = found & (np.abs(o - med) > _JUMP_PX)
+        o, found, jump, thr, figs = _first_edges(v, offs, sign, noise)
         good = found & ~jump
         near_end = found & (np.abs(o) > _TRACK_REACH - 2.0)  # (the edge may lie past the reach)
-        figs = {"dome_contrast": float(np.median(strength) / max(noise, 1e-12)),
-                "edge_sign": float(np.mean(np.sign(v[np.arange(v.shape[0]), np.argmax(np.abs(v), axis=1)]) == sign))}
-        if (np.median(strength) < 10.0 * noise or good.mean() < 1.0 - _LOST_FLAG or near_end.mean() > 0.02
+        if (figs["dome_contrast"] < 10.0 or good.mean() < 1.0 - _LOST_FLAG or near_end.mean() > 0.02
                 or good.sum() < 20):
             return None, None, figs
         u, z = xy[good, 0] + o[good] * nu[good], xy[good, 1] + o[good] * nz[good]

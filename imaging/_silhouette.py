@@ -293,7 +293,6 @@ def _fit_walls(sd, peaks, r0, r1, top_row, base_row):
     # the wall's zone lies inside the well: its outer edge is the wall (the left one walked in flipped columns)
     left = m - 1 - _wall_edges(strip[:, ::-1], m - 1 - cl)
     right = _wall_edges(strip, cr)
-    left, right = np.asarray(left), np.asarray(right)
     fits, res = [], []
     for u in (left, right):
         ok = np.isfinite(u)
