@@ -33,6 +33,11 @@ Run with ``python benchmarks/imaging.py [--quick] [--frames 500]``.
    the same file is printed for reference).
    ``--sweep N`` adds the worst figures over N seeds per nuisance (small chamber):
    seed-dependent failures (a speck of dust in the wrong place) show there.
+   The same read-versus-extract figures follow for the silhouette route
+   (``--look-frames`` frames of optics-rendered looks, :mod:`osmobulge.imaging.looks`,
+   0.8 um/px, Vtilde 0 -> 4 with the flat frame first, written to a TIFF and
+   extracted with the ``Chamber`` given, as ``benchmarks/looks.py`` does).
+   Target there (issue 16): extraction no slower than 10x reading.
 3. **Memory**: peak traced heap (tracemalloc, numpy buffers included) of
    ``extract`` on a 100- and a 500-frame TIFF cycling through 40 frames of that
    series.  Target: flat in the number of frames.
@@ -62,9 +67,11 @@ from scipy.spatial import cKDTree  # noqa: E402
 from osmobulge.imaging._chamber import FrameView  # noqa: E402
 from osmobulge.imaging.extract import extract  # noqa: E402
 from osmobulge.imaging.io import open_series, write_series  # noqa: E402
+from osmobulge.imaging.looks import render_look  # noqa: E402
 from osmobulge.imaging.synthetic import Nuisances, render_series  # noqa: E402
 from osmobulge.imaging.trace import trace_series  # noqa: E402
 from osmobulge.modeling import PreStretch  # noqa: E402
+from osmobulge.modeling.transport import Chamber  # noqa: E402
 
 REF = (200e-6, 110e-6, 20e-6)
 PRE = PreStretch(0.01, 0.0)
@@ -326,11 +333,56 @@ def speed_and_memory(n_speed, n_mem, quick):
               f"the frames alone would be {n_mem * 2:.0f} MiB)")
 
 
+def _median_pass(fn, n):
+    """Median over 3 passes of ``fn()``'s time per frame (s), and its last result."""
+    times = []
+    for _ in range(3):
+        t0 = time.perf_counter()
+        out = fn()
+        times.append((time.perf_counter() - t0) / n)
+    return float(np.median(times)), out
+
+
+def _read_all(path):
+    ser = open_series(path, frame_interval=600.0)
+    for i in range(len(ser)):
+        ser[i]
+    ser.close()
+
+
+def silhouette_speed(n_frames, looks=("edge_dark", "defocus", "halo")):
+    """Read vs extract per frame on optics-rendered looks written to a TIFF (the silhouette route)."""
+    print(f"\n## Speed of the silhouette route (optics looks, {n_frames} frames, 1024 x 1024 16-bit TIFF,"
+          " page cache warm, one core)\n")
+    print("| look | route | read ms/frame | extract ms/frame (incl. reading) | extract / read | frames ok |")
+    print("|---|---|---|---|---|---|")
+    vt = np.linspace(0.0, 4.0, n_frames) ** 1.5 / 2.0
+    ratios = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        for name in looks:
+            s = render_look(name, vt, lambda_pre=PRE)
+            px = s.truth.attrs["pixel_size"]
+            chamber = Chamber(*(s.truth.attrs[k] for k in ("chamber_radius", "chamber_depth",
+                                                              "membrane_thickness")), 3000.0)
+            path = _write_tiff(Path(tmp) / f"{name}.tif", list(s.frames), px, 600.0)
+            extract(path, chamber=chamber, frame_interval=600.0, progress=False)  # (kernels loaded)
+            t_read, _ = _median_pass(lambda: _read_all(path), n_frames)
+            t_ext, ds = _median_pass(lambda: extract(path, chamber=chamber, frame_interval=600.0,
+                                                     progress=False), n_frames)
+            ratios[name] = t_ext / t_read
+            print(f"| {name} | {ds.attrs['tracer']} | {1e3 * t_read:.2f} | {1e3 * t_ext:.2f} |"
+                  f" {t_ext / t_read:.1f}x | {int((ds.flag == 'ok').sum())}/{n_frames} |", flush=True)
+    print("\ntarget (issue 16): extraction no slower than 10x reading -- "
+          + "; ".join(f"{k}: {'met' if v <= 10 else 'NOT met'} ({v:.1f}x)" for k, v in ratios.items()))
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="fewer volumes and frames")
     ap.add_argument("--frames", type=int, default=500, help="frames of the long series of the memory test")
     ap.add_argument("--speed-frames", type=int, default=100, help="frames of the speed test")
+    ap.add_argument("--look-frames", type=int, default=25,
+                    help="frames of each optics look of the silhouette route's speed test (0: skip it)")
     ap.add_argument("--skip-accuracy", action="store_true")
     ap.add_argument("--skip-speed", action="store_true", help="skip the speed and memory part")
     ap.add_argument("--sweep", type=int, default=0, metavar="N",
@@ -343,6 +395,8 @@ def main():
         sweep(args.sweep)
     if not args.skip_speed:
         speed_and_memory(args.speed_frames, 200 if args.quick else args.frames, args.quick)
+        if args.look_frames:
+            silhouette_speed(args.look_frames)
 
 
 if __name__ == "__main__":
