@@ -242,6 +242,27 @@ def _series_file(folder, n, base):
     return _write_tiff(path, (base[i % len(base)] for i in range(n)), 1e-6, 600.0)
 
 
+def _median_pass(fn, n, before=None):
+    """Median over 3 passes of ``fn()``'s time per frame (s, over ``n`` frames), and its last result;
+    ``before()`` (untimed) runs ahead of each pass."""
+    times = []
+    for _ in range(3):
+        if before is not None:
+            before()
+        t0 = time.perf_counter()
+        out = fn()
+        times.append((time.perf_counter() - t0) / n)
+    return float(np.median(times)), out
+
+
+def _read_all(path):
+    """Every frame of the series at ``path`` read once with osmobulge's reader."""
+    ser = open_series(path, frame_interval=600.0)
+    for i in range(len(ser)):
+        ser[i]
+    ser.close()
+
+
 def speed_and_memory(n_speed, n_mem, quick):
     print("\n## Speed (1024 x 1024 16-bit, one core) and memory\n")
     # the speed series grows as filmed (Vtilde 0 -> 5 over n_speed frames, e.g. every 15 min over a day);
@@ -268,37 +289,20 @@ def speed_and_memory(n_speed, n_mem, quick):
         if hasattr(os, "posix_fadvise"):
             sources["same TIFF, page cache dropped before each pass"] = tiff
         for label, path in sources.items():
-            reads, exts = [], []
-            cold = label.startswith("same TIFF")
-            for _ in range(3):
-                if cold:
-                    _drop_cache(path)
-                t0 = time.perf_counter()
-                ser = open_series(path, frame_interval=600.0)
-                for i in range(len(ser)):
-                    ser[i]
-                reads.append((time.perf_counter() - t0) / n_speed)
-                ser.close()
-            for _ in range(3):
-                if cold:
-                    _drop_cache(path)
-                t0 = time.perf_counter()
-                ds = extract(path, frame_interval=600.0, progress=False)
-                exts.append((time.perf_counter() - t0) / n_speed)
-            t_read, t_ext = float(np.median(reads)), float(np.median(exts))
+            before = (lambda: _drop_cache(path)) if label.startswith("same TIFF") else None
+            t_read, _ = _median_pass(lambda: _read_all(path), n_speed, before)
+            t_ext, ds = _median_pass(lambda: extract(path, frame_interval=600.0, progress=False), n_speed, before)
             ratios[label] = t_ext / t_read
             t_exts[label] = t_ext
             print(f"| {label} | {1e3 * t_read:.2f} | {1e3 * t_ext:.2f} | {1 / t_ext:.0f} | {t_ext / t_read:.1f}x |"
                   f" {int((ds.flag == 'ok').sum())}/{n_speed} |")
         # for reference: the same file read page by page with tifffile's own decoder (what a script would do)
-        tf_reads = []
-        for _ in range(3):
-            t0 = time.perf_counter()
+        def tifffile_read():
             with tifffile.TiffFile(tiff) as tf:
                 for page in tf.pages:
                     page.asarray()
-            tf_reads.append((time.perf_counter() - t0) / n_speed)
-        t_tf = float(np.median(tf_reads))
+
+        t_tf, _ = _median_pass(tifffile_read, n_speed)
         t_mp = t_exts["multi-page TIFF (uncompressed, memory-mapped)"]
         modes = {}
         _, traces = trace_series(base)
@@ -333,23 +337,6 @@ def speed_and_memory(n_speed, n_mem, quick):
               f"the frames alone would be {n_mem * 2:.0f} MiB)")
 
 
-def _median_pass(fn, n):
-    """Median over 3 passes of ``fn()``'s time per frame (s), and its last result."""
-    times = []
-    for _ in range(3):
-        t0 = time.perf_counter()
-        out = fn()
-        times.append((time.perf_counter() - t0) / n)
-    return float(np.median(times)), out
-
-
-def _read_all(path):
-    ser = open_series(path, frame_interval=600.0)
-    for i in range(len(ser)):
-        ser[i]
-    ser.close()
-
-
 def silhouette_speed(n_frames, looks=("edge_dark", "defocus", "halo")):
     """Read vs extract per frame on optics-rendered looks written to a TIFF (the silhouette route)."""
     print(f"\n## Speed of the silhouette route (optics looks, {n_frames} frames, 1024 x 1024 16-bit TIFF,"
@@ -363,7 +350,8 @@ def silhouette_speed(n_frames, looks=("edge_dark", "defocus", "halo")):
             s = render_look(name, vt, lambda_pre=PRE)
             px = s.truth.attrs["pixel_size"]
             chamber = Chamber(*(s.truth.attrs[k] for k in ("chamber_radius", "chamber_depth",
-                                                              "membrane_thickness")), 3000.0)
+                                                              "membrane_thickness")),
+                              concentration=3000.0)  # mol/m**3 (3 M NaCl, as benchmarks/looks.py)
             path = _write_tiff(Path(tmp) / f"{name}.tif", list(s.frames), px, 600.0)
             extract(path, chamber=chamber, frame_interval=600.0, progress=False)  # (kernels loaded)
             t_read, _ = _median_pass(lambda: _read_all(path), n_frames)
