@@ -128,9 +128,10 @@ def _relative(img, sigma=25.0):
     return np.maximum(bg, 1e-6 * max(float(bg.max()), 1e-30))
 
 
-def _deviation(img):
-    """|img / local light - 1|, scaled by its 99.5th percentile (the map the silhouettes are found on)."""
-    bg = _relative(img)
+def _deviation(img, light=None):
+    """|img / local light - 1|, scaled by its 99.5th percentile (the map the silhouettes are found on);
+    ``light``: the local light (:func:`_relative`) when already computed."""
+    bg = _relative(img) if light is None else light
     d = np.abs(img - bg) / bg
     return d / max(float(np.percentile(d, 99.5)), 1e-12)
 
@@ -152,20 +153,22 @@ def _vertex(a, b, c):
     return np.where(den < 0, off, 0.0)
 
 
-def _walls_any_depth(view, l0_px, depth_px, d=None, **locate):
+def _walls_any_depth(view, l0_px, depth_px, d=None, light=None, **locate):
     """find_walls, trying well depths of 100, 50, 25 and 200 px when the depth is not known.
 
     A guess is taken when the well's bottom face is found below the rows the
     walls were searched in (the upper 60 % of the guessed depth).  ``locate``:
-    find_walls' ``near`` and ``top_near`` (a given rim).
+    find_walls' ``near`` and ``top_near`` (a given rim); ``light``: the view's
+    local light (:func:`_relative`), computed here when not given.
     """
+    light = _relative(view) if light is None else light
     if depth_px is not None:
-        return find_walls(view, l0_px, depth_px=depth_px, **locate)
-    d = _deviation(view) if d is None else d
+        return find_walls(view, l0_px, depth_px=depth_px, light=light, **locate)
+    d = _deviation(view, light) if d is None else d
     err = None
     for guess in (100.0, 50.0, 25.0, 200.0):
         try:
-            w = find_walls(view, l0_px, depth_px=guess, **locate)
+            w = find_walls(view, l0_px, depth_px=guess, light=light, **locate)
         except ChamberNotFound as e:
             err = e
             continue
@@ -196,17 +199,20 @@ def _plausible(d, w, l0_px, depth_px):
     return ""
 
 
-def _straightest(frame, names, l0_px, depth_px, known_l0, locate=None):
+def _straightest(frame, names, l0_px, depth_px, known_l0, locate=None, light=None):
     """Of the orientations ``names`` where the walls are found (``locate(k)``: find_walls' ``near`` and
     ``top_near`` in the view of quarter turn ``k``) and the chamber is plausible (:func:`_plausible`), the one
-    with the straightest walls, as ``(name, k, walls)`` (None if none), and why each other one is not."""
+    with the straightest walls, as ``(name, k, walls)`` (None if none), and why each other one is not.
+    ``light``: the frame's local light (:func:`_relative`) when already computed."""
     best, errors = None, []
+    frame = np.asarray(frame, float)
+    light = _relative(frame) if light is None else light  # (isotropic: each view's is this one turned)
     for name in names:
         k = ROTATIONS[name]
-        view = np.rot90(np.asarray(frame, float), k)
-        d = _deviation(view)
+        view, bg = np.rot90(frame, k), np.rot90(light, k)
+        d = _deviation(view, bg)
         try:
-            w = _walls_any_depth(view, l0_px, depth_px, d, **(locate(k) if locate else {}))
+            w = _walls_any_depth(view, l0_px, depth_px, d, bg, **(locate(k) if locate else {}))
         except ChamberNotFound as err:
             errors.append(f"{name}: {err}")
             continue
@@ -218,17 +224,17 @@ def _straightest(frame, names, l0_px, depth_px, known_l0, locate=None):
     return best, errors
 
 
-def _upright(frame, l0_px, depth_px, known_l0):
+def _upright(frame, l0_px, depth_px, known_l0, light=None):
     """The quarter turn whose view shows a chamber dome side up (walls below a top face), and its walls: the
     straightest plausible one (:func:`_straightest`)."""
-    best, errors = _straightest(frame, ROTATIONS, l0_px, depth_px, known_l0)
+    best, errors = _straightest(frame, ROTATIONS, l0_px, depth_px, known_l0, light=light)
     if best is None:
         raise ChamberNotFound("no top face with two wall silhouettes below it in any orientation (" +
                               "; ".join(errors) + ")")
     return best
 
 
-def _at_rim(frame, rim, l0_px, depth_px, known_l0, bulge_direction):
+def _at_rim(frame, rim, l0_px, depth_px, known_l0, bulge_direction, light=None):
     """The orientation, quarter turn and walls of the chamber whose rim is given (stored-frame ``(col, row)`` px
     of the flat mid-line's two ends at the walls), found within a few px of it.
 
@@ -245,7 +251,7 @@ def _at_rim(frame, rim, l0_px, depth_px, known_l0, bulge_direction):
         vx, vy = FrameView(frame, k).from_frame(pts[:, 1], pts[:, 0])
         return {"near": tuple(sorted(np.asarray(vx, float))), "top_near": float(np.mean(vy)) - 0.5 * l0_px}
 
-    best, errors = _straightest(frame, names, l0_px, depth_px, known_l0, locate)
+    best, errors = _straightest(frame, names, l0_px, depth_px, known_l0, locate, light)
     if best is None:
         raise ChamberNotFound("no chamber at the given rim (" + "; ".join(errors) + ")")
     return best
@@ -383,6 +389,7 @@ class SilhouetteTracer:
             raise ChamberNotFound(dark)
         guess = 25.0 if l0_px is None else float(l0_px)
         near = None
+        light = _relative(np.asarray(frame, float))  # the local light, once (each view's is it turned)
         if rim is not None:
             rim = np.asarray(rim, float)
             if rim.shape != (2, 2) or not np.all(np.isfinite(rim)):
@@ -390,21 +397,22 @@ class SilhouetteTracer:
             if np.hypot(*(rim[1] - rim[0])) < 40:  # (find_walls' narrowest well)
                 raise ValueError(f"the rim's two points are {np.hypot(*(rim[1] - rim[0])):.0f} px apart: they are "
                                  f"the flat mid-line's ends at the two walls, at least 40 px apart")
-            bulge_direction, self.k, w = _at_rim(frame, rim, guess, depth_px, l0_px is not None, bulge_direction)
+            bulge_direction, self.k, w = _at_rim(frame, rim, guess, depth_px, l0_px is not None, bulge_direction,
+                                                 light)
             near = (w.left, w.right)
         elif bulge_direction == "auto":
-            bulge_direction, self.k, w = _upright(frame, guess, depth_px, l0_px is not None)
+            bulge_direction, self.k, w = _upright(frame, guess, depth_px, l0_px is not None, light)
         else:
             self.k = ROTATIONS[bulge_direction]
-            view = np.rot90(np.asarray(frame, float), self.k)
-            d = _deviation(view)
-            w = _walls_any_depth(view, guess, depth_px, d)
+            view, bg = np.rot90(np.asarray(frame, float), self.k), np.rot90(light, self.k)
+            d = _deviation(view, bg)
+            w = _walls_any_depth(view, guess, depth_px, d, bg)
             why = _plausible(d, w, l0_px, depth_px)
             if why:
                 raise ChamberNotFound(f"no chamber seen dome side {bulge_direction}: {why}")
         self.bulge_direction = bulge_direction
-        img = np.rot90(np.asarray(frame, float), self.k)
-        d = _deviation(img)
+        img, light = np.rot90(np.asarray(frame, float), self.k), np.rot90(light, self.k)
+        d = _deviation(img, light)
         if l0_px is None:  # the flat film's faces over the well
             l0_px = _film_thickness(d, w.top_row, w.left, w.right, guess)
             if not (np.isfinite(l0_px) and l0_px > 1.0):
@@ -420,7 +428,7 @@ class SilhouetteTracer:
                 raise ChamberNotFound("the well's bottom face is not seen below the walls: pass the chamber "
                                       "(its depth)")
         self.depth = float(depth_px)
-        w = find_walls(img, self.l0, depth_px=self.depth, top_row=w.top_row, strip=_STRIP, near=near)
+        w = find_walls(img, self.l0, depth_px=self.depth, top_row=w.top_row, strip=_STRIP, near=near, light=light)
         self._check_upright(d, w)
         self._check_flat(d, w)
         self.walls0 = w
@@ -429,7 +437,7 @@ class SilhouetteTracer:
         self.ref = self._geometry(w)
         self.blur = np.nan
         self._flat = native_frame(frame)  # (stored orientation: sampled in the view by quarter turn k)
-        self._bg = np.ascontiguousarray(_relative(img), np.float32)  # (in the view)
+        self._bg = np.ascontiguousarray(light, np.float32)  # (in the view)
         self.view_shape = img.shape
         # the base below the film (walls, well bottom), registered frame to frame; no dome there
         self._reg_rows = (int(np.ceil(w.base_row + 5)), min(int(w.base_row + self.depth) + 40, img.shape[0]))
