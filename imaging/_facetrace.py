@@ -389,7 +389,8 @@ class SilhouetteTracer:
             raise ChamberNotFound(dark)
         guess = 25.0 if l0_px is None else float(l0_px)
         near = None
-        light = _relative(np.asarray(frame, float))  # the local light, once (each view's is it turned)
+        values = np.asarray(frame, float)  # (once: every view below is a turn of it)
+        light = _relative(values)  # the local light, once (each view's is it turned)
         if rim is not None:
             rim = np.asarray(rim, float)
             if rim.shape != (2, 2) or not np.all(np.isfinite(rim)):
@@ -397,21 +398,21 @@ class SilhouetteTracer:
             if np.hypot(*(rim[1] - rim[0])) < 40:  # (find_walls' narrowest well)
                 raise ValueError(f"the rim's two points are {np.hypot(*(rim[1] - rim[0])):.0f} px apart: they are "
                                  f"the flat mid-line's ends at the two walls, at least 40 px apart")
-            bulge_direction, self.k, w = _at_rim(frame, rim, guess, depth_px, l0_px is not None, bulge_direction,
+            bulge_direction, self.k, w = _at_rim(values, rim, guess, depth_px, l0_px is not None, bulge_direction,
                                                  light)
             near = (w.left, w.right)
         elif bulge_direction == "auto":
-            bulge_direction, self.k, w = _upright(frame, guess, depth_px, l0_px is not None, light)
+            bulge_direction, self.k, w = _upright(values, guess, depth_px, l0_px is not None, light)
         else:
             self.k = ROTATIONS[bulge_direction]
-            view, bg = np.rot90(np.asarray(frame, float), self.k), np.rot90(light, self.k)
+            view, bg = np.rot90(values, self.k), np.rot90(light, self.k)
             d = _deviation(view, bg)
             w = _walls_any_depth(view, guess, depth_px, d, bg)
             why = _plausible(d, w, l0_px, depth_px)
             if why:
                 raise ChamberNotFound(f"no chamber seen dome side {bulge_direction}: {why}")
         self.bulge_direction = bulge_direction
-        img, light = np.rot90(np.asarray(frame, float), self.k), np.rot90(light, self.k)
+        img, light = np.rot90(values, self.k), np.rot90(light, self.k)
         d = _deviation(img, light)
         if l0_px is None:  # the flat film's faces over the well
             l0_px = _film_thickness(d, w.top_row, w.left, w.right, guess)

@@ -27,6 +27,19 @@ def _chamber(truth):
     return Chamber(a, h, l0, 3000.0)
 
 
+def _volume_tolerance(s):
+    """The issue's volume tolerance per frame (px**3): max(3 %, a 0.5 px layer over the rim disc)."""
+    p = s.truth.attrs["pixel_size"]
+    rim = s.truth.rim_radius.values[0] / p
+    return np.maximum(0.03 * s.truth.volume.values / p**3, 0.5 * np.pi * rim**2)
+
+
+def _known(s):
+    """The chamber's membrane thickness and well depth in px: the tracer's ``l0_px`` and ``depth_px``."""
+    p, ch = s.truth.attrs["pixel_size"], _chamber(s.truth)
+    return dict(l0_px=ch.thickness / p, depth_px=ch.depth / p)
+
+
 def _extract(s, **kw):
     return extract(s.frames, pixel_size=s.truth.attrs["pixel_size"], chamber=_chamber(s.truth), progress=False,
                    frame_interval=600.0, **kw)
@@ -292,11 +305,8 @@ def test_tracked_frames_agree_with_the_full_search():
     vt = np.linspace(0.3, 1.2, 7)
     s = render_look("edge_dark", np.r_[0.0, vt], shape=SHAPE, lambda_pre=PRE)
     p = s.truth.attrs["pixel_size"]
-    ch = _chamber(s.truth)
-    kw = dict(l0_px=ch.thickness / p, depth_px=ch.depth / p)
-    tracked, full = SilhouetteTracer(s.frames[0], **kw), SilhouetteTracer(s.frames[0], **kw)
-    rim = s.truth.rim_radius.values[0] / p
-    tol = np.maximum(0.03 * s.truth.volume.values / p**3, 0.5 * np.pi * rim**2)
+    tracked, full = SilhouetteTracer(s.frames[0], **_known(s)), SilhouetteTracer(s.frames[0], **_known(s))
+    tol = _volume_tolerance(s)
     for i, f in enumerate(s.frames):
         a = tracked.process(f, i)
         full._track = None  # (never tracked: every frame searched by rays)
@@ -310,12 +320,6 @@ def test_tracked_frames_agree_with_the_full_search():
     assert full.searches == len(s.frames) and tracked.searches <= 3
 
 
-def _volume_tolerance(s):
-    p = s.truth.attrs["pixel_size"]
-    rim = s.truth.rim_radius.values[0] / p
-    return np.maximum(0.03 * s.truth.volume.values / p**3, 0.5 * np.pi * rim**2)
-
-
 def test_a_dome_that_turns_and_shrinks_is_tracked_back():
     """The dome grows, then shrinks (a leak, or the bath made saltier): the track's prediction (on by the last
     step) is then wrong by two steps; the frames stay ok, within tolerance of the truth, and equal to the full
@@ -323,9 +327,7 @@ def test_a_dome_that_turns_and_shrinks_is_tracked_back():
     vt = [0.0, 0.6, 0.7, 0.8, 0.7, 0.6, 0.5, 0.4]
     s = render_look("edge_dark", vt, shape=SHAPE, lambda_pre=PRE)
     p = s.truth.attrs["pixel_size"]
-    ch = _chamber(s.truth)
-    kw = dict(l0_px=ch.thickness / p, depth_px=ch.depth / p)
-    tracked, full = SilhouetteTracer(s.frames[0], **kw), SilhouetteTracer(s.frames[0], **kw)
+    tracked, full = SilhouetteTracer(s.frames[0], **_known(s)), SilhouetteTracer(s.frames[0], **_known(s))
     tol = _volume_tolerance(s)
     searched = []
     for i, f in enumerate(s.frames):
@@ -349,8 +351,7 @@ def test_the_frame_after_a_flagged_one_is_searched_and_measured():
     vt = [0.0, 0.3, 0.45, 0.6, 0.75, 0.9]
     s = render_look("edge_dark", vt, shape=SHAPE, lambda_pre=PRE)
     p = s.truth.attrs["pixel_size"]
-    ch = _chamber(s.truth)
-    tr = SilhouetteTracer(s.frames[0], l0_px=ch.thickness / p, depth_px=ch.depth / p)
+    tr = SilhouetteTracer(s.frames[0], **_known(s))
     frames = [np.asarray(f, float) for f in s.frames]
     axis = int(s.truth.axis_x.values[3])
     frames[3][:, axis + 60 :] = frames[0][:, axis + 60 :]
