@@ -53,7 +53,7 @@ from skimage.registration import phase_cross_correlation
 
 from osmobulge.imaging._chamber import ROTATIONS, ChamberGeometry, ChamberNotFound, FrameView, Line, Well
 from osmobulge.imaging._kernels import native_frame, sample_transects
-from osmobulge.imaging._silhouette import find_walls
+from osmobulge.imaging._silhouette import FlatMaps, find_walls
 from osmobulge.imaging.geometry import revolution_measures, smooth_profile
 from osmobulge.imaging.trace import FrameTrace, TraceSettings, first_flag, manual_curve
 
@@ -153,22 +153,21 @@ def _vertex(a, b, c):
     return np.where(den < 0, off, 0.0)
 
 
-def _walls_any_depth(view, l0_px, depth_px, d=None, light=None, **locate):
-    """find_walls, trying well depths of 100, 50, 25 and 200 px when the depth is not known.
+def _walls_any_depth(maps, k, l0_px, depth_px, **locate):
+    """find_walls in the view of quarter turn ``k`` of the flat frame's maps (:class:`FlatMaps`), trying well
+    depths of 100, 50, 25 and 200 px when the depth is not known.
 
     A guess is taken when the well's bottom face is found below the rows the
     walls were searched in (the upper 60 % of the guessed depth).  ``locate``:
-    find_walls' ``near`` and ``top_near`` (a given rim); ``light``: the view's
-    local light (:func:`_relative`), computed here when not given.
+    find_walls' ``near`` and ``top_near`` (a given rim).
     """
-    light = _relative(view) if light is None else light
     if depth_px is not None:
-        return find_walls(view, l0_px, depth_px=depth_px, light=light, **locate)
-    d = _deviation(view, light) if d is None else d
+        return find_walls(None, l0_px, depth_px=depth_px, maps=(maps, k), **locate)
+    d = np.rot90(maps.size, k)
     err = None
     for guess in (100.0, 50.0, 25.0, 200.0):
         try:
-            w = find_walls(view, l0_px, depth_px=guess, light=light, **locate)
+            w = find_walls(None, l0_px, depth_px=guess, maps=(maps, k), **locate)
         except ChamberNotFound as e:
             err = e
             continue
@@ -199,20 +198,17 @@ def _plausible(d, w, l0_px, depth_px):
     return ""
 
 
-def _straightest(frame, names, l0_px, depth_px, known_l0, locate=None, light=None):
+def _straightest(maps, names, l0_px, depth_px, known_l0, locate=None):
     """Of the orientations ``names`` where the walls are found (``locate(k)``: find_walls' ``near`` and
     ``top_near`` in the view of quarter turn ``k``) and the chamber is plausible (:func:`_plausible`), the one
     with the straightest walls, as ``(name, k, walls)`` (None if none), and why each other one is not.
-    ``light``: the frame's local light (:func:`_relative`) when already computed."""
+    ``maps``: the frame's :class:`FlatMaps` (each view's are them turned)."""
     best, errors = None, []
-    frame = np.asarray(frame, float)
-    light = _relative(frame) if light is None else light  # (isotropic: each view's is this one turned)
     for name in names:
         k = ROTATIONS[name]
-        view, bg = np.rot90(frame, k), np.rot90(light, k)
-        d = _deviation(view, bg)
+        d = np.rot90(maps.size, k)
         try:
-            w = _walls_any_depth(view, l0_px, depth_px, d, bg, **(locate(k) if locate else {}))
+            w = _walls_any_depth(maps, k, l0_px, depth_px, **(locate(k) if locate else {}))
         except ChamberNotFound as err:
             errors.append(f"{name}: {err}")
             continue
@@ -224,17 +220,17 @@ def _straightest(frame, names, l0_px, depth_px, known_l0, locate=None, light=Non
     return best, errors
 
 
-def _upright(frame, l0_px, depth_px, known_l0, light=None):
+def _upright(maps, l0_px, depth_px, known_l0):
     """The quarter turn whose view shows a chamber dome side up (walls below a top face), and its walls: the
     straightest plausible one (:func:`_straightest`)."""
-    best, errors = _straightest(frame, ROTATIONS, l0_px, depth_px, known_l0, light=light)
+    best, errors = _straightest(maps, ROTATIONS, l0_px, depth_px, known_l0)
     if best is None:
         raise ChamberNotFound("no top face with two wall silhouettes below it in any orientation (" +
                               "; ".join(errors) + ")")
     return best
 
 
-def _at_rim(frame, rim, l0_px, depth_px, known_l0, bulge_direction, light=None):
+def _at_rim(maps, rim, l0_px, depth_px, known_l0, bulge_direction):
     """The orientation, quarter turn and walls of the chamber whose rim is given (stored-frame ``(col, row)`` px
     of the flat mid-line's two ends at the walls), found within a few px of it.
 
@@ -248,10 +244,10 @@ def _at_rim(frame, rim, l0_px, depth_px, known_l0, bulge_direction, light=None):
                                                                  ["left", "right"])
 
     def locate(k):  # the rim in the view: the walls' columns and the top face l0/2 above the mid-line
-        vx, vy = FrameView(frame, k).from_frame(pts[:, 1], pts[:, 0])
+        vx, vy = FrameView(maps.values, k).from_frame(pts[:, 1], pts[:, 0])
         return {"near": tuple(sorted(np.asarray(vx, float))), "top_near": float(np.mean(vy)) - 0.5 * l0_px}
 
-    best, errors = _straightest(frame, names, l0_px, depth_px, known_l0, locate, light)
+    best, errors = _straightest(maps, names, l0_px, depth_px, known_l0, locate)
     if best is None:
         raise ChamberNotFound("no chamber at the given rim (" + "; ".join(errors) + ")")
     return best
@@ -389,8 +385,9 @@ class SilhouetteTracer:
             raise ChamberNotFound(dark)
         guess = 25.0 if l0_px is None else float(l0_px)
         near = None
-        values = np.asarray(frame, float)  # (once: every view below is a turn of it)
-        light = _relative(values)  # the local light, once (each view's is it turned)
+        # the local light and the deviation from it, once: every view's below are them turned
+        values = np.asarray(frame, float)
+        maps = FlatMaps(values, _relative(values))
         if rim is not None:
             rim = np.asarray(rim, float)
             if rim.shape != (2, 2) or not np.all(np.isfinite(rim)):
@@ -398,22 +395,19 @@ class SilhouetteTracer:
             if np.hypot(*(rim[1] - rim[0])) < 40:  # (find_walls' narrowest well)
                 raise ValueError(f"the rim's two points are {np.hypot(*(rim[1] - rim[0])):.0f} px apart: they are "
                                  f"the flat mid-line's ends at the two walls, at least 40 px apart")
-            bulge_direction, self.k, w = _at_rim(values, rim, guess, depth_px, l0_px is not None, bulge_direction,
-                                                 light)
+            bulge_direction, self.k, w = _at_rim(maps, rim, guess, depth_px, l0_px is not None, bulge_direction)
             near = (w.left, w.right)
         elif bulge_direction == "auto":
-            bulge_direction, self.k, w = _upright(values, guess, depth_px, l0_px is not None, light)
+            bulge_direction, self.k, w = _upright(maps, guess, depth_px, l0_px is not None)
         else:
             self.k = ROTATIONS[bulge_direction]
-            view, bg = np.rot90(values, self.k), np.rot90(light, self.k)
-            d = _deviation(view, bg)
-            w = _walls_any_depth(view, guess, depth_px, d, bg)
-            why = _plausible(d, w, l0_px, depth_px)
+            w = _walls_any_depth(maps, self.k, guess, depth_px)
+            why = _plausible(np.rot90(maps.size, self.k), w, l0_px, depth_px)
             if why:
                 raise ChamberNotFound(f"no chamber seen dome side {bulge_direction}: {why}")
         self.bulge_direction = bulge_direction
-        img, light = np.rot90(values, self.k), np.rot90(light, self.k)
-        d = _deviation(img, light)
+        img, light, _ = maps.view(self.k)
+        d = np.rot90(maps.size, self.k)
         if l0_px is None:  # the flat film's faces over the well
             l0_px = _film_thickness(d, w.top_row, w.left, w.right, guess)
             if not (np.isfinite(l0_px) and l0_px > 1.0):
@@ -429,7 +423,8 @@ class SilhouetteTracer:
                 raise ChamberNotFound("the well's bottom face is not seen below the walls: pass the chamber "
                                       "(its depth)")
         self.depth = float(depth_px)
-        w = find_walls(img, self.l0, depth_px=self.depth, top_row=w.top_row, strip=_STRIP, near=near, light=light)
+        w = find_walls(None, self.l0, depth_px=self.depth, top_row=w.top_row, strip=_STRIP, near=near,
+                       maps=(maps, self.k))
         self._check_upright(d, w)
         self._check_flat(d, w)
         self.walls0 = w

@@ -27,7 +27,7 @@ from scipy import ndimage
 
 from osmobulge.imaging._chamber import ChamberNotFound
 
-__all__ = ["SilhouetteWalls", "find_walls"]
+__all__ = ["FlatMaps", "SilhouetteWalls", "find_walls"]
 
 #: largest row scatter (px) of a wall's silhouette edge about its line
 MAX_WALL_RMS = 0.5
@@ -72,8 +72,53 @@ def _half_crossing(prof, peak, step, base=0.0):
     return k + step * (prof[k] - half) / (prof[k] - prof[j])
 
 
+class FlatMaps:
+    """A flat frame's maps that :func:`find_walls` reads and a quarter turn only turns, computed once.
+
+    The local light, the signed relative deviation from it (scaled by the
+    99.5th percentile of its size, which no turn changes) and the row scores
+    of the top-face search (:func:`_top_face`): those of a view turned by a
+    half turn are the same rows reversed, so they are computed for two of the
+    four views.  :meth:`view` gives find_walls' inputs for quarter turn ``k``
+    (``np.rot90``'s).
+    """
+
+    def __init__(self, frame, light):
+        self.values = np.asarray(frame, float)
+        self.light = np.asarray(light, float)
+        if self.light.shape != self.values.shape:
+            raise ValueError(f"light has shape {self.light.shape}, the frame {self.values.shape}")
+        self.deviation = _scaled_deviation(self.values, self.light)
+        self.size = np.abs(self.deviation)
+        self._scores = {}
+
+    def view(self, k):
+        """``(img, light, deviation)`` of the view turned by ``k`` quarter turns."""
+        return tuple(np.rot90(a, k) for a in (self.values, self.light, self.deviation))
+
+    def scores(self, k, l0_px):
+        """The top-face search's row scores of view ``k``: the size's 15th percentile over the columns and the
+        :func:`_line_score` of the frame."""
+        key = (k % 2, float(l0_px))
+        if key not in self._scores:
+            k0 = k % 2
+            self._scores[key] = (np.percentile(np.rot90(self.size, k0), 15, axis=1),
+                                 _line_score(np.rot90(self.values, k0), l0_px))
+        rows, line = self._scores[key]
+        return (rows, line) if k % 4 < 2 else (rows[::-1], line[::-1])
+
+
+def _scaled_deviation(img, bg):
+    """(img - light) / light over the 99.5th percentile of its size (what the silhouettes are found on)."""
+    sd = (img - bg) / np.maximum(bg, 1e-6 * max(float(bg.max()), 1e-30))
+    scale = np.percentile(np.abs(sd), 99.5)
+    if scale <= 1e-9:  # relative deviation: nothing but rounding
+        raise ChamberNotFound("the frame is uniform: no top face or walls to find")
+    return sd / scale
+
+
 def find_walls(frame, l0_px, *, strip=(0.15, 0.6), depth_px=None, min_width=40, top_row=None,
-               near=None, top_near=None, light=None) -> SilhouetteWalls:
+               near=None, top_near=None, light=None, maps=None) -> SilhouetteWalls:
     """Find the top face and the two walls of the central well in a flat, bulge-up frame.
 
     Parameters
@@ -102,30 +147,36 @@ def find_walls(frame, l0_px, *, strip=(0.15, 0.6), depth_px=None, min_width=40, 
     light : ndarray of shape (M, N), optional
         The local light level when known (a later frame of a series: the flat
         frame's, moved by the drift); default the frame's Gaussian of 25 px.
+    maps : (FlatMaps, int), optional
+        The frame's maps and the quarter turn ``frame`` is of them (``frame``
+        and ``light`` are then not read): the same walls, without computing
+        again what the turns share.
 
     Raises
     ------
     ChamberNotFound
         No straight top face, or fewer than two wall silhouettes.
     """
-    img = np.asarray(frame, float)
-    if img.ndim != 2:
-        raise ValueError(f"frame must be 2-D, got shape {img.shape}")
     if not (np.isfinite(l0_px) and l0_px > 0):
         raise ValueError(f"l0_px must be > 0, got {l0_px!r}")
-    # relative deviation from the local light level (uneven illumination divides out)
-    bg = ndimage.gaussian_filter(img, 25.0, mode="nearest") if light is None else np.asarray(light, float)
-    if bg.shape != img.shape:
-        raise ValueError(f"light has shape {bg.shape}, the frame {img.shape}")
-    sd = (img - bg) / np.maximum(bg, 1e-6 * max(float(bg.max()), 1e-30))
-    d = np.abs(sd)
-    scale = np.percentile(d, 99.5)
-    if scale <= 1e-9:  # relative deviation: nothing but rounding
-        raise ChamberNotFound("the frame is uniform: no top face or walls to find")
-    d /= scale
-    sd /= scale
+    scores = None
+    if maps is not None:
+        flat, k = maps
+        img, _, sd = flat.view(k)
+        d = np.rot90(flat.size, k)
+        scores = None if top_row is not None else flat.scores(k, l0_px)
+    else:
+        img = np.asarray(frame, float)
+        if img.ndim != 2:
+            raise ValueError(f"frame must be 2-D, got shape {img.shape}")
+        # relative deviation from the local light level (uneven illumination divides out)
+        bg = ndimage.gaussian_filter(img, 25.0, mode="nearest") if light is None else np.asarray(light, float)
+        if bg.shape != img.shape:
+            raise ValueError(f"light has shape {bg.shape}, the frame {img.shape}")
+        sd = _scaled_deviation(img, bg)
+        d = np.abs(sd)
     if top_row is None:
-        top_row = _top_face(d, l0_px, img, near=top_near)
+        top_row = _top_face(d, l0_px, img, near=top_near, scores=scores)
     base_row = top_row + l0_px
     depth = 100.0 if depth_px is None else float(depth_px)
     r0 = int(np.ceil(base_row + strip[0] * depth))
@@ -161,8 +212,10 @@ def _line_score(img, l0_px):
     below clear water) differs from one side only, and scores 0, however
     strong; against a Gaussian local light it would be a ramp tens of rows wide
     that can outscore a faint, blurred face.  Each side's level is the median
-    of ``0.4 l`` rows starting ``0.55 l`` away (past the film's other face's
-    reach, short of its distance), on columns averaged in fours.  ``l0`` may be
+    of about ``0.4 l`` rows (an odd number: the score of the frame turned
+    upside down is this one reversed) starting ``0.55 l`` away (past the
+    film's other face's reach, short of its distance), on columns averaged in
+    fours.  ``l0`` may be
     a guess: a film thinner than ``l0/2`` puts the level below its top face in
     the base, which a turbid base makes darker than the face, so thinner
     trials are scored too.
@@ -171,7 +224,7 @@ def _line_score(img, l0_px):
     s = img[:, : w - w % 4].reshape(h, -1, 4).mean(axis=2)
     best = np.zeros(h)
     for thick in (l0_px, 0.5 * l0_px, 0.25 * l0_px):
-        gap, win = max(int(round(0.55 * thick)), 2), max(int(round(0.4 * thick)), 3)
+        gap, win = max(int(round(0.55 * thick)), 2), max(int(round(0.4 * thick)), 3) | 1  # (odd: centred)
         off = gap + win // 2
         if off >= h:
             continue
@@ -185,15 +238,17 @@ def _line_score(img, l0_px):
     return best
 
 
-def _top_face(d, l0_px, img=None, near=None):
+def _top_face(d, l0_px, img=None, near=None, scores=None):
     """Row of the top face: the row that stands out as a line across nearly the whole frame.
 
     The row is the peak of :func:`_line_score` (of ``img``, when given), its
     centre and extent read on the |deviation|'s row score around it (its 15th
     percentile over the columns; the well's bottom face, as strong, spans only
     the well).  ``near``: only rows within ``max(l0/2, 4)`` px of it.
+    ``scores``: the row score and line score when already computed
+    (:meth:`FlatMaps.scores`; ``img`` is then not read).
     """
-    row_score = np.percentile(d, 15, axis=1)
+    row_score = np.percentile(d, 15, axis=1) if scores is None else scores[0]
     allowed = np.ones(row_score.size, bool)
     if near is not None:
         reach = max(0.5 * l0_px, 4.0)
@@ -202,8 +257,8 @@ def _top_face(d, l0_px, img=None, near=None):
             raise ChamberNotFound(f"the top face the given rim implies ({near:.0f} px into the bulge-up view) is "
                                   f"outside the frame")
     top = int(np.argmax(np.where(allowed, row_score, -np.inf)))
-    if img is not None:  # a line, not a step: then the deviation's own peak within 2 rows
-        score = np.where(allowed, _line_score(img, l0_px), -np.inf)
+    if img is not None or scores is not None:  # a line, not a step: then the deviation's own peak within 2 rows
+        score = np.where(allowed, _line_score(img, l0_px) if scores is None else scores[1], -np.inf)
         line = int(np.argmax(score))
         if score[line] >= _LINE_FLOOR:  # (else no row is a line: the deviation's peak it is)
             lo = max(line - 2, 0)

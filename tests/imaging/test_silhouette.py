@@ -120,3 +120,33 @@ def test_the_top_face_of_a_thin_film_on_a_turbid_base_with_the_thickness_guessed
     assert abs(_top_face(_deviation(img), 25.0, img) - true) < 0.3  # (measured 0.06 px; was 107 px off)
     w = find_walls(img, 25.0, depth_px=137.5)
     assert abs(w.rim_radius - 250.0) < 0.5
+
+
+def test_the_shared_maps_give_each_turn_what_find_walls_finds_on_it_alone():
+    """FlatMaps (the light, deviation and row scores computed once, turned per view) against find_walls on each
+    turned frame by itself: the same walls in all four views; the half-turned views' row scores are the
+    unturned ones reversed (exactly: the columns a multiple of four, odd median windows)."""
+    from osmobulge.imaging._facetrace import _relative
+    from osmobulge.imaging._silhouette import FlatMaps, _line_score
+
+    look = LOOKS["edge_dark"]
+    p = look.pixel_size
+    _, h, l0 = look.chamber
+    s = render_look("edge_dark", [0.0], shape=(700, 900))
+    img = np.asarray(s.frames[0], float)
+    maps = FlatMaps(img, _relative(img))
+    for k in range(4):
+        view = np.rot90(img, k)
+        rows, line = maps.scores(k, l0 / p)
+        np.testing.assert_allclose(line, _line_score(view, l0 / p), rtol=0, atol=1e-12)
+        np.testing.assert_allclose(rows, np.percentile(np.rot90(maps.size, k), 15, axis=1), rtol=0, atol=0)
+        try:
+            alone = find_walls(view, l0 / p, depth_px=h / p, light=_relative(view))
+        except ChamberNotFound as err:
+            with pytest.raises(ChamberNotFound, match=str(err)[:30]):
+                find_walls(None, l0 / p, depth_px=h / p, maps=(maps, k))
+            continue
+        shared = find_walls(None, l0 / p, depth_px=h / p, maps=(maps, k))
+        assert shared == alone, k
+    upright = find_walls(None, l0 / p, depth_px=h / p, maps=(maps, 0))
+    assert abs(upright.rim_radius - float(s.truth.isel(time=0).rim_radius) / p) < 0.5  # (the well, not a stray)
