@@ -67,8 +67,8 @@ _RAY_STEP, _SMOOTH = 0.5, 0.7
 _JUMP_PX = 3.0
 #: fraction of rays over the dome whose edge jumped, or that have none, that flags poor_fit
 _JUMP_FLAG, _LOST_FLAG = 0.05, 0.10
-#: vertical transects (columns) the change's noise is measured on
-_NOISE_COLUMNS = 32
+#: vertical transects (columns) the change's noise is measured on (16, 32 and 64 agree within 3 % on the looks)
+_NOISE_COLUMNS = 16
 #: reach (px, each side) of the search along the last frame's outer face's normals, and its stations' spacing
 #: (px; samples every _RAY_STEP as on the rays)
 _TRACK_REACH, _TRACK_STATIONS = 30.0, 4.5
