@@ -15,6 +15,7 @@ from osmobulge.experiments.curation import (
     remove_manual_profile,
     save_curation,
     set_chamber_regions,
+    set_rim,
     set_manual_profile,
     set_time_origin,
 )
@@ -46,6 +47,7 @@ __all__ = [
     "remove_manual_profile",
     "save_curation",
     "set_chamber_regions",
+    "set_rim",
     "set_manual_profile",
     "set_time_origin",
     "BatchResult",

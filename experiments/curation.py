@@ -8,7 +8,8 @@ Kept beside the data in ``DIR/curation.json``, never inside the raw images:
 - priors: points picked on some frames that guide the automatic tracer on
   the frames between (the semi-automatic mode; same coordinates);
 - the time origin (when the chamber met the water), in seconds of the frame clock;
-- chamber regions, when one field holds several chambers.
+- chamber regions, when one field holds several chambers;
+- the chamber's rim in the flat frame, when the automatic search does not find it.
 
 Rules
 -----
@@ -56,6 +57,7 @@ __all__ = [
     "remove_prior",
     "set_time_origin",
     "set_chamber_regions",
+    "set_rim",
     "apply_curation",
     "curation_fingerprint",
     "curation_summary",
@@ -103,6 +105,12 @@ class Curation:
         Time (frame clock) taken as t = 0 of the flux model.
     chamber_regions : tuple of dict or None
         ``{"name", "rows": [r0, r1], "cols": [c0, c1]}`` (pixels); None: as in experiment.toml.
+    rim : tuple of 4 float or None
+        ``(col0, row0, col1, row1)`` (pixels of the full frame): the flat
+        membrane's mid-line ends at the two walls in the first (flat) frame,
+        which locate the chamber for the silhouette route (``rim=`` of
+        :func:`osmobulge.imaging.extract.extract`); None: as in experiment.toml
+        (``[imaging] rim_px``).
     history : tuple of dict
         Every change: ``{"at", "by", "action", "frame", "detail"}``.
     revision : int
@@ -115,6 +123,7 @@ class Curation:
     priors: dict = field(default_factory=dict)
     time_origin: float | None = None
     chamber_regions: tuple | None = None
+    rim: tuple | None = None
     history: tuple = ()
     revision: int = 0
 
@@ -130,6 +139,7 @@ class Curation:
             "priors": {str(k): v for k, v in sorted(self.priors.items())},
             "time_origin": self.time_origin,
             "chamber_regions": None if self.chamber_regions is None else [dict(r) for r in self.chamber_regions],
+            "rim": None if self.rim is None else list(self.rim),
             "history": list(self.history),
         }
 
@@ -160,6 +170,7 @@ class Curation:
             priors=priors,
             time_origin=None if data.get("time_origin") is None else float(data["time_origin"]),
             chamber_regions=None if regions is None else tuple(_check_regions(regions)),
+            rim=None if data.get("rim") is None else _check_rim(data["rim"]),  # (absent in older files)
             history=tuple(data.get("history", ())),
             revision=int(data.get("revision", 0)),
         )
@@ -178,6 +189,8 @@ class Curation:
         }
         if self.priors:  # only when set: curations without priors keep the hashes they had before priors existed
             out["priors"] = strip(self.priors)
+        if self.rim is not None:  # (likewise)
+            out["rim"] = list(self.rim)
         return out
 
     def _log(self, action: str, frame=None, detail="", by=None) -> tuple:
@@ -212,6 +225,25 @@ def _check_points(points, name="points") -> list:
         raise ValueError(f"{name}: coordinates up to {np.nanmax(np.abs(arr)):g} m: expected metres "
                          "(pixel coordinates must be multiplied by the pixel size)")
     return arr.tolist()
+
+
+#: closest the rim's two ends may be (px; the silhouette route's narrowest well)
+_RIM_MIN_PX = 40.0
+
+
+def _check_rim(rim) -> tuple:
+    arr = np.asarray(rim, dtype=float)
+    if arr.size != 4:
+        raise ValueError(f"rim = {rim!r}: expected the two ends of the flat mid-line, [col0, row0, col1, row1] "
+                         f"(pixels)")
+    arr = arr.ravel()
+    if not np.all(np.isfinite(arr)) or np.any(arr < -0.5):
+        raise ValueError(f"rim = {rim!r}: expected finite pixel coordinates inside the frame (>= 0)")
+    gap = float(np.hypot(arr[2] - arr[0], arr[3] - arr[1]))
+    if gap < _RIM_MIN_PX:
+        raise ValueError(f"rim = {rim!r}: its two ends are {gap:.0f} px apart; they are the flat mid-line's ends at "
+                         f"the two walls, at least {_RIM_MIN_PX:.0f} px apart")
+    return tuple(float(v) for v in arr)
 
 
 def _check_regions(regions) -> list:
@@ -592,6 +624,36 @@ def set_chamber_regions(cur: Curation, regions, *, by: str | None = None, force:
     return replace(cur, chamber_regions=new, history=cur._log("chamber_regions", None, f"{len(new)} regions", by))
 
 
+@_path_or_curation
+def set_rim(cur: Curation, rim, *, by: str | None = None, force: bool = False) -> Curation:
+    """Set (or, with ``rim=None``, clear) the chamber's rim in the flat frame.
+
+    Parameters
+    ----------
+    cur : Curation or path
+    rim : array_like of 4 float (pixels) or None
+        ``[col0, row0, col1, row1]`` of the full frame: the flat membrane's
+        mid-line ends at the two walls in the first frame (e.g. the two ends
+        of points picked in napari).  It replaces ``[imaging] rim_px`` of
+        experiment.toml; the silhouette route then looks for the top face and
+        walls within a few pixels of it.  None: back to experiment.toml's.
+    force : bool
+        Replace (or clear) a different rim set before.
+
+    Returns
+    -------
+    Curation
+    """
+    new = None if rim is None else _check_rim(rim)
+    if cur.rim == new:
+        return cur
+    if cur.rim is not None and not force:
+        raise CurationConflict(f"the rim was set before ({', '.join(f'{v:.1f}' for v in cur.rim)} px); pass "
+                               f"force=True to {'clear' if new is None else 'replace'} it")
+    detail = "cleared" if new is None else ", ".join(f"{v:.1f}" for v in new) + " px"
+    return replace(cur, rim=new, history=cur._log("rim", None, detail, by))
+
+
 # ---- use ------------------------------------------------------------------------------------------
 def curation_fingerprint(cur: Curation, part: str = "all") -> str:
     """Content hash of the decisions that matter for a step.
@@ -600,7 +662,7 @@ def curation_fingerprint(cur: Curation, part: str = "all") -> str:
     ----------
     cur : Curation
     part : {"all", "extraction", "fit"}
-        ``extraction``: manual profiles, priors and chamber regions; ``fit``: exclusions,
+        ``extraction``: manual profiles, priors, chamber regions and the rim; ``fit``: exclusions,
         kept flagged frames and the time origin.
 
     Returns
@@ -613,7 +675,7 @@ def curation_fingerprint(cur: Curation, part: str = "all") -> str:
         raise ValueError(f"part = {part!r}: expected one of {parts}")
     d = cur.decisions()
     if part == "extraction":
-        d = {k: d[k] for k in ("manual_profiles", "priors", "chamber_regions") if k in d}
+        d = {k: d[k] for k in ("manual_profiles", "priors", "chamber_regions", "rim") if k in d}
     elif part == "fit":
         d = {k: d[k] for k in ("excluded", "kept_flagged", "time_origin")}
     return hashlib.sha256(json.dumps(d, sort_keys=True).encode()).hexdigest()
@@ -636,6 +698,7 @@ def curation_summary(cur: Curation) -> dict:
         "prior_frames": sorted(int(k) for k in cur.priors),
         "time_origin_s": cur.time_origin,
         "n_chamber_regions": 0 if cur.chamber_regions is None else len(cur.chamber_regions),
+        "rim_px": None if cur.rim is None else list(cur.rim),
         "revision": cur.revision,
         "n_changes": len(cur.history),
     }

@@ -474,11 +474,14 @@ def write_experiment_report(exp, path) -> Path:
     rep.h2("Curation")
     cs = curation_summary(cur)
     flags = read_state(exp.path).get("steps", {}).get("process", {}).get("summary", {}).get("flags", {})
-    rep.table({"frames": extraction.sizes["time"], "used by the fits": js.get("n_kept"),
-               "excluded by a person": cs["n_excluded"], "automatic flags": ", ".join(
-                   f"{k}: {v}" for k, v in flags.items()) or "none",
-               "kept although flagged": cs["n_kept_flagged"], "manual profiles": cs["n_manual_profiles"],
-               "time origin (s)": cs["time_origin_s"], "curation revision": cs["revision"]})
+    rows = {"frames": extraction.sizes["time"], "used by the fits": js.get("n_kept"),
+            "excluded by a person": cs["n_excluded"], "automatic flags": ", ".join(
+                f"{k}: {v}" for k, v in flags.items()) or "none",
+            "kept although flagged": cs["n_kept_flagged"], "manual profiles": cs["n_manual_profiles"],
+            "time origin (s)": cs["time_origin_s"], "curation revision": cs["revision"]}
+    if cs["rim_px"] is not None:
+        rows["rim given (col, row px)"] = "({:.1f}, {:.1f}) - ({:.1f}, {:.1f})".format(*cs["rim_px"])
+    rep.table(rows)
     if cs["excluded"]:
         rep.table([{"frame": k, "reason": v["reason"], "note": v["note"]} for k, v in cs["excluded"].items()])
 

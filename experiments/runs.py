@@ -908,7 +908,8 @@ def process_experiment(exp: Experiment, results: Path, *, progress: Callable | N
     The frames are read lazily (:func:`open_experiment_frames`); each chamber
     region (``curation.json`` or ``[imaging] chamber_regions``) is cropped and
     extracted on its own and the datasets are stacked along a ``chamber``
-    dimension.  Manual profiles of ``curation.json`` replace the automatic
+    dimension; a rim (``curation.json``'s, else ``[imaging] rim_px``) locates
+    the chamber instead.  Manual profiles of ``curation.json`` replace the automatic
     trace of their frames (``profile_source = "manual"``); its priors (points
     picked on a few frames, the semi-automatic mode) are passed to the tracer
     as ``priors=`` and their frame numbers recorded in the ``prior_frames``
@@ -942,6 +943,10 @@ def process_experiment(exp: Experiment, results: Path, *, progress: Callable | N
     cur = load_curation(exp.path)
     im = exp.imaging
     regions = list(cur.chamber_regions) if cur.chamber_regions is not None else [dict(r) for r in im.chamber_regions]
+    rim = cur.rim if cur.rim is not None else im.rim  # (the curation's replaces experiment.toml's)
+    if rim is not None and regions:  # (experiment.toml's own pair is refused by the metadata check)
+        raise FramesError(f"a rim ({'curation.json' if cur.rim is not None else '[imaging] rim_px'}) and chamber "
+                          f"regions are both set: the rim locates one chamber in the whole field; clear one of them")
     count = [0, 0]
 
     def on_frame():
@@ -999,8 +1004,8 @@ def process_experiment(exp: Experiment, results: Path, *, progress: Callable | N
                   "bulge_direction": im.bulge_direction, "metadata": None, **options}
         if ref_k is not None:
             kwargs["reference_frame"] = ref_k
-        if im.rim is not None:  # (never with chamber_regions: the metadata check says so)
-            kwargs["rim"] = np.reshape(im.rim, (2, 2)) * p
+        if rim is not None:
+            kwargs["rim"] = np.reshape(rim, (2, 2)) * p
         if per_region[k]:
             kwargs["manual_profiles"] = per_region[k]
         if priors_region[k]:

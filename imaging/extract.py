@@ -556,9 +556,10 @@ _LOOK_HINT = (". Both searches failed: the band route needs a filled membrane ba
               "well's liquid and the base; the silhouette route needs an upright view with the two walls' "
               "silhouettes in the base below a straight top face. Ways in: crop to one chamber with "
               "chamber_region=(col0, col1) (bulge-up view) when several wells confuse the search, give the rim "
-              "(rim=((x_left, y_left), (x_right, y_right)) in m: the flat mid-line's ends at the walls, e.g. of a "
-              "flat profile picked in napari), pass the chamber (its membrane thickness and depth), or pick the "
-              "profiles by hand in napari (python -m osmobulge.plugins EXPERIMENT, Profile picker)")
+              "(rim=((x_left, y_left), (x_right, y_right)) in m: the flat mid-line's ends at the walls; in an "
+              "experiment folder [imaging] rim_px, or napari's Profile picker: Rim = ends of this frame's "
+              "picks), pass the chamber (its membrane thickness and depth), or pick the profiles by hand in "
+              "napari (python -m osmobulge.plugins EXPERIMENT, Profile picker)")
 
 #: the ``reference_frame`` attr of an extraction whose chamber was found in the source's own first frame
 OWN_FIRST_FRAME = "first frame"

@@ -441,6 +441,31 @@ class CurationSession:
             regions = self.experiment.imaging.chamber_regions
         return [dict(r) for r in regions or ()]
 
+    def rim(self) -> tuple | None:
+        """The chamber's rim in use, ``(col0, row0, col1, row1)`` px of the full frame: the curation's, else
+        experiment.toml's ``[imaging] rim_px`` (None: found automatically)."""
+        if self.curation.rim is not None:
+            return tuple(self.curation.rim)
+        rim = self.experiment.imaging.rim
+        return None if rim is None else tuple(float(v) for v in np.ravel(rim))
+
+    def rim_from_picks(self, frame: int) -> tuple:
+        """The rim a frame's picks give: the picked curve's two ends (the flat mid-line's ends at the walls),
+        left to right, as ``(col0, row0, col1, row1)`` px."""
+        frame = self.check_frame(frame)
+        p = self.picks.get(frame, np.empty((0, 2)))
+        if len(p) < 2:
+            raise ValueError(f"frame {frame + 1}: pick the flat mid-line's two ends at the walls first "
+                             f"({len(p)} point{'s' * (len(p) != 1)} picked)")
+        (r0, c0), (r1, c1) = sorted([tuple(p[0]), tuple(p[-1])], key=lambda rc: rc[1])
+        return float(c0), float(r0), float(c1), float(r1)
+
+    def set_rim(self, rim, *, by: str | None = None) -> None:
+        """Set the chamber's rim (``(col0, row0, col1, row1)`` px; None: back to experiment.toml's) and save;
+        the next extraction (:meth:`reprocess`) locates the chamber by it."""
+        self._save(cur_api.set_rim(self.curation, rim, by=by, force=True))
+        self._emit("rim", None)
+
     # ------------------------------------------------------------------ V/V0(t)
     def live_dataset(self):
         """The extraction with the session's manual profiles in place of the automatic ones.

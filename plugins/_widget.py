@@ -339,6 +339,8 @@ class ProfilePicker(Container):
         self._semi = PushButton(text="Semi-automatic: trace between picked frames")
         self._keep_priors = PushButton(text="Keep picks as priors (used by every later extraction)")
         self._reprocess = PushButton(text="Re-run extraction with manual profiles")
+        self._rim = PushButton(text="Rim = ends of this frame's picks (flat frame)")
+        self._rim_clear = PushButton(text="Clear the rim")
         self._file = FileEdit(mode="w", filter="Points (*.csv *.zip *.roi)", label="points file")
         self._import = PushButton(text="Import points")
         self._export = PushButton(text="Export points")
@@ -346,7 +348,8 @@ class ProfilePicker(Container):
         io = Container(widgets=[self._file, Container(widgets=[self._import, self._export], layout="horizontal",
                                                           labels=False)], labels=True)
         self.extend([Container(widgets=[self._snap, self._search], labels=True), self._info, self._accept,
-                     self._clear, self._remove, self._semi, self._keep_priors, self._reprocess, io,
+                     self._clear, self._remove, self._semi, self._keep_priors, self._reprocess,
+                     Container(widgets=[self._rim, self._rim_clear], layout="horizontal", labels=False), io,
                      self._message])
         self._updating = False
         self._building = False
@@ -356,6 +359,8 @@ class ProfilePicker(Container):
         self._semi.changed.connect(self.semi_automatic)
         self._keep_priors.changed.connect(self.keep_priors)
         self._reprocess.changed.connect(self.reprocess)
+        self._rim.changed.connect(self.set_rim)
+        self._rim_clear.changed.connect(self.clear_rim)
         self._import.changed.connect(lambda: self.import_points(self._file.value))
         self._export.changed.connect(lambda: self.export_points(self._file.value))
         self.points_layer = None
@@ -509,6 +514,24 @@ class ProfilePicker(Container):
         """Run the process step with the saved manual profiles and reload the automatic profiles."""
         self._guard(self.session.reprocess)
         self._message.value = "extraction updated"
+
+    def set_rim(self):
+        """Save the current frame's picked ends as the chamber's rim (curation.json): where the next extraction
+        looks for the top face and walls when it does not find them by itself."""
+        rim = self._guard(self.session.rim_from_picks, self.frame)
+        self._guard(self.session.set_rim, rim)
+        where = "" if self.frame == 0 else f" (picked on frame {self.frame + 1}: it is used in the first frame)"
+        self._message.value = ("rim saved: ({:.1f}, {:.1f}) - ({:.1f}, {:.1f}) px".format(*rim) + where +
+                               "; re-run extraction to use it")
+        return rim
+
+    def clear_rim(self):
+        """Forget the rim saved in curation.json (experiment.toml's, if any, is used again)."""
+        self._guard(self.session.set_rim, None)
+        rim = self.session.rim()
+        self._message.value = "rim cleared" + ("" if rim is None else
+                                               "; experiment.toml's rim_px is used: ({:.1f}, {:.1f}) - "
+                                               "({:.1f}, {:.1f}) px".format(*rim))
 
     def import_points(self, path):
         """Load points from a CSV or ImageJ ROI file, as they are (not snapped)."""

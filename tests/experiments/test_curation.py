@@ -30,6 +30,7 @@ from osmobulge.experiments.curation import (
     set_chamber_regions,
     set_manual_profile,
     set_prior,
+    set_rim,
     set_time_origin,
 )
 
@@ -277,3 +278,38 @@ def test_priors_count_for_extraction_not_fit():
                                                                           "extraction")
     # without priors the hash is the one of a curation written before priors existed
     assert "priors" not in base.decisions() and "priors" in pr.decisions()
+
+
+def test_the_rim_is_kept_checked_and_not_overwritten_silently(tmp_path):
+    """set_rim: saved and read back, part of the extraction's fingerprint (a changed rim re-runs the process
+    step), refused when malformed, replaced or cleared only with force; curations without one keep their
+    fingerprint (files written before the rim existed)."""
+    plain = exclude_frame(Curation(), 2, "other")
+    assert "rim" not in plain.decisions() and curation_summary(plain)["rim_px"] is None
+    cur = set_rim(tmp_path, [40.5, 100.0, 440.0, 101.5], by="ana")
+    assert cur.rim == (40.5, 100.0, 440.0, 101.5)
+    back = load_curation(tmp_path)
+    assert back.rim == cur.rim and back.history[-1]["action"] == "rim" and back.history[-1]["by"] == "ana"
+    assert curation_summary(back)["rim_px"] == [40.5, 100.0, 440.0, 101.5]
+    assert json.loads((tmp_path / CURATION_FILE).read_text())["rim"] == [40.5, 100.0, 440.0, 101.5]
+    fp = curation_fingerprint(back, "extraction")
+    assert fp != curation_fingerprint(Curation(), "extraction")
+    assert curation_fingerprint(back, "fit") == curation_fingerprint(Curation(), "fit")
+    assert set_rim(back, [40.5, 100.0, 440.0, 101.5]) is back  # (the same rim: no change)
+    with pytest.raises(CurationConflict, match="rim was set before"):
+        set_rim(back, [41.0, 100.0, 440.0, 101.5])
+    with pytest.raises(CurationConflict, match="force=True to clear"):
+        set_rim(back, None)
+    moved = set_rim(back, [41.0, 100.0, 440.0, 101.5], force=True)
+    assert curation_fingerprint(moved, "extraction") != fp
+    assert set_rim(moved, None, force=True).rim is None
+    for bad, why in (([1.0, 2.0, 3.0], "expected the two ends"), ([0.0, 0.0, 30.0, 0.0], "30 px apart"),
+                     ([0.0, np.nan, 100.0, 0.0], "finite"), ([-5.0, 0.0, 100.0, 0.0], "finite")):
+        with pytest.raises(ValueError, match=why):
+            set_rim(Curation(), bad)
+    # a hand-edited file with a bad rim is refused on loading, not used
+    data = json.loads((tmp_path / CURATION_FILE).read_text())
+    data["rim"] = [1, 2, 3]
+    (tmp_path / CURATION_FILE).write_text(json.dumps(data))
+    with pytest.raises(ValueError, match="rim"):
+        load_curation(tmp_path)

@@ -367,3 +367,40 @@ def test_a_rim_in_the_metadata_locates_the_chamber(tmp_path):
         e = _write(tmp_path / f"bad{len(why)}", s.frames, name="bad", extra=bad + "\n")
         res = run_experiment(e, ["process"])
         assert res.status == "invalid" and why in res.error, (res.status, res.error)
+
+
+def test_a_rim_saved_in_the_curation_is_the_one_used(tmp_path):
+    """curation.json's rim (what napari's Profile picker saves) replaces [imaging] rim_px: a rim in the water
+    fails the chamber search there, the chamber's own measures the truth, and changing it re-runs the step."""
+    from osmobulge.experiments.curation import set_rim
+    from osmobulge.imaging.looks import LOOKS
+    from osmobulge.imaging.synthetic import render_series
+
+    look = LOOKS["edge_dark"]
+    s = render_series([0.0, 0.5, 1.0], chamber=CHAMBER, pixel_size=P, shape=(200, 260), times=np.arange(3) * DT,
+                      optics=look.optics, nuisances=look.nuisances, seed=4)
+    t = s.truth
+    row, col, r = t.attrs["anchor_row"], t.attrs["anchor_col"], float(t["rim_radius"][0]) / P
+    good = [col - r + 1.0, row - 1.0, col + r, row + 1.0]
+    water = [good[0], good[1] - 40.0, good[2], good[3] - 40.0]
+    d = _write(tmp_path / "rim", s.frames, name="rim", extra="rim_px = [{:.1f}, {:.1f}, {:.1f}, {:.1f}]\n".format(*good))
+    set_rim(d, water)
+    out = run_experiment(d, ["process"])
+    assert out.status != "ok" and "given rim" in out.error, (out.status, out.error)
+    set_rim(d, good, force=True)
+    out = run_experiment(d, ["process"])
+    assert out.status == "ok" and out.steps[0].status == "done", out.error
+    ds = xr.load_dataset(d / "results" / "extraction.nc", engine="h5netcdf")
+    assert ds.attrs["tracer"] == "silhouette" and (ds["flag"].values == "ok").all()
+    tol = np.maximum(0.03 * t["volume"].values, 0.5 * P * np.pi * t["rim_radius"].values ** 2)
+    assert np.all(np.abs(ds["volume"].values - t["volume"].values) <= tol)
+    assert np.all(np.abs(ds["rim_radius"].values - t["rim_radius"].values) <= 0.5 * P)
+    assert run_experiment(d, ["process"]).steps[0].status == "skipped"
+    set_rim(d, [good[0] + 0.5, *good[1:]], force=True)
+    assert run_experiment(d, ["process"]).steps[0].status == "done"
+    # with chamber regions (here the curation's) the rim is refused: it locates one chamber in the whole field
+    from osmobulge.experiments.curation import set_chamber_regions
+
+    set_chamber_regions(d, [{"name": "c", "rows": [0, 200], "cols": [0, 260]}])
+    res = run_experiment(d, ["process"])
+    assert res.status == "invalid" and "rim (curation.json) and chamber regions" in res.error, res.error

@@ -133,6 +133,32 @@ def test_keep_picks_as_priors_button(make_napari_viewer, experiment):
     assert "priors" in pp._message.value
 
 
+def test_rim_from_the_picks_button(make_napari_viewer, experiment):
+    """The Profile picker saves the two ends of the first frame's picks as the chamber's rim (curation.json,
+    what the next extraction locates the chamber by) and clears it; too few picks is said, nothing saved."""
+    from osmobulge.plugins._widget import ProfilePicker
+
+    folder, truth = experiment
+    viewer = make_napari_viewer()
+    _open(viewer, folder)
+    pp = ProfilePicker(viewer)
+    pp._snap.value = False  # (the points stay where clicked)
+    viewer.dims.set_current_step(0, 0)
+    mid = truth_midline_rc(truth, 0)
+    left, right = mid[np.argmin(mid[:, 1])], mid[np.argmax(mid[:, 1])]
+    pp.points_layer.add([0, *right])
+    with pytest.raises(Exception, match="two ends"):  # (psygnal's EmitLoopError around the ValueError)
+        pp._rim.clicked.emit()
+    assert load_curation(folder).rim is None and "error" in pp._message.value
+    pp.points_layer.add([0, *left])
+    pp._rim.clicked.emit()
+    rim = load_curation(folder).rim
+    np.testing.assert_allclose(rim, [left[1], left[0], right[1], right[0]], rtol=0, atol=1e-9)  # (col, row)
+    assert pp.session.rim() == rim and "rim saved" in pp._message.value
+    pp._rim_clear.clicked.emit()
+    assert load_curation(folder).rim is None and pp.session.rim() is None and "cleared" in pp._message.value
+
+
 def test_keyboard_shortcuts(make_napari_viewer, experiment):
     from osmobulge.plugins._widget import CurationWidget, ProfilePicker
 
