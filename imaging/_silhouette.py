@@ -13,8 +13,11 @@ frame of the flat membrane:
   the light just outside the wall), fitted by a line and read at the base's top
   surface (``l0`` below the top face).
 
-It is look-agnostic (``|I - background|``), and not yet used by the tracer:
-tested on the optics looks against their true well radius.
+It is look-agnostic (``|I - background|``); the silhouette route
+(:class:`osmobulge.imaging._facetrace.SilhouetteTracer`) finds the chamber with
+it in the first frame (:class:`FlatMaps`: what its four orientations share,
+computed once) and follows the walls with it frame by frame.  Tested on the
+optics looks against their true well radius.
 """
 
 from __future__ import annotations
