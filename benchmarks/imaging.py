@@ -386,13 +386,11 @@ def silhouette_speed(n_frames, looks=("edge_dark", "defocus", "halo"), n_day=97)
             run()  # (kernels loaded)
             t_read, _ = _median_pass(lambda: _read_all(path), n_frames)
             t_ext, ds = _median_pass(run, n_frames)
-            cold = ""
+            cold = ("", "", "")
             if drop:
                 t_read_c, _ = _median_pass(lambda: _read_all(path), n_frames, lambda: _drop_cache(path))
                 t_ext_c, _ = _median_pass(run, n_frames, lambda: _drop_cache(path))
                 cold = f" / {1e3 * t_read_c:.2f}", f" / {1e3 * t_ext_c:.2f}", f" / {t_ext_c / t_read_c:.1f}x"
-            else:
-                cold = ("", "", "")
             setup, per, searched = _tracer_times([np.asarray(f) for f in s.frames], chamber, px)
             tracked = per[~searched] if (~searched).any() else np.array([np.nan])
             sought = per[searched] if searched.any() else np.array([np.nan])

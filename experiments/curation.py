@@ -238,7 +238,7 @@ def _check_rim(rim) -> tuple:
                          f"(pixels)")
     arr = arr.ravel()
     if not np.all(np.isfinite(arr)) or np.any(arr < -0.5):
-        raise ValueError(f"rim = {rim!r}: expected finite pixel coordinates inside the frame (>= 0)")
+        raise ValueError(f"rim = {rim!r}: expected finite pixel coordinates inside the frame (>= -0.5, its edge)")
     gap = float(np.hypot(arr[2] - arr[0], arr[3] - arr[1]))
     if gap < _RIM_MIN_PX:
         raise ValueError(f"rim = {rim!r}: its two ends are {gap:.0f} px apart; they are the flat mid-line's ends at "

@@ -128,14 +128,6 @@ def _relative(img, sigma=25.0):
     return np.maximum(bg, 1e-6 * max(float(bg.max()), 1e-30))
 
 
-def _deviation(img, light=None):
-    """|img / local light - 1|, scaled by its 99.5th percentile (the map the silhouettes are found on);
-    ``light``: the local light (:func:`_relative`) when already computed."""
-    bg = _relative(img) if light is None else light
-    d = np.abs(img - bg) / bg
-    return d / max(float(np.percentile(d, 99.5)), 1e-12)
-
-
 def _profiles(img):
     """The mean of ``img`` over its columns and over its rows, each less its own mean: what the drift is read
     from."""

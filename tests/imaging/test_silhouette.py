@@ -108,8 +108,8 @@ def test_the_top_face_is_a_line_not_a_step():
 def test_the_top_face_of_a_thin_film_on_a_turbid_base_with_the_thickness_guessed():
     """A 10 um film (12.5 px) on a turbid base, searched with the 25 px guess of an unknown thickness: the
     level 14-24 px below the top face lies in the darker base, so the guess alone scores the face 0."""
-    from osmobulge.imaging._facetrace import _deviation
-    from osmobulge.imaging._silhouette import _top_face
+    from osmobulge.imaging._facetrace import _relative
+    from osmobulge.imaging._silhouette import FlatMaps, _top_face
     from osmobulge.imaging.synthetic import render_series
 
     look = LOOKS["turbid_base"]
@@ -117,7 +117,8 @@ def test_the_top_face_of_a_thin_film_on_a_turbid_base_with_the_thickness_guessed
                       pixel_size=0.8e-6, shape=(700, 900), seed=2)
     img = np.asarray(s.frames[0], float)
     true = s.truth.attrs["anchor_row"] - 6.25
-    assert abs(_top_face(_deviation(img), 25.0, img) - true) < 0.3  # (measured 0.06 px; was 107 px off)
+    d = FlatMaps(img, _relative(img)).size  # |deviation| from the local light, scaled
+    assert abs(_top_face(d, 25.0, img) - true) < 0.3  # (measured 0.06 px; was 107 px off)
     w = find_walls(img, 25.0, depth_px=137.5)
     assert abs(w.rim_radius - 250.0) < 0.5
 
