@@ -30,7 +30,8 @@ from numba import njit, types
 from numba.core import cgutils
 from numba.extending import intrinsic
 
-__all__ = ["sample_transects", "ends_noise", "band_edges_rows", "step_crossing_rows", "robust_line", "line_band",
+__all__ = ["sample_transects", "change_transects", "ends_noise", "band_edges_rows", "step_crossing_rows",
+           "robust_line", "line_band",
            "viterbi_rows", "lsq_spline", "fill_rows_nanmedian", "nanmedian", "column_nanmedian", "longest_run",
            "running_percentile",
            "low_contrast_run", "ellipse_distance_folded", "robust_profile_spline", "pass_tail", "strongest_edge",
@@ -167,6 +168,57 @@ def sample_transects(frame, k, points, directions, offsets):
     o = np.ascontiguousarray(offsets, np.float64).ravel()
     out = np.empty((len(p), len(o)), np.float64)
     _sample_transects(frame, int(k) % 4, p[:, 0].copy(), p[:, 1].copy(), d[:, 0].copy(), d[:, 1].copy(), o, out)
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _change_transects(frame, k, flat, light, px, py, qx, qy, dx, dy, offsets, weights, out):
+    n, m = out.shape
+    ref = np.empty((n, m))
+    bg = np.empty((n, m))
+    _sample_transects(frame, k, px, py, dx, dy, offsets, out)
+    _sample_transects(flat, k, qx, qy, dx, dy, offsets, ref)
+    _sample_transects(light, 0, qx, qy, dx, dy, offsets, bg)
+    r = (weights.size - 1) // 2
+    row = np.empty(m)
+    for i in range(n):
+        for j in range(m):
+            v = (out[i, j] - ref[i, j]) / bg[i, j]
+            row[j] = v if np.isfinite(v) else 0.0
+        for j in range(m):  # a Gaussian along the transect, the ends repeated (scipy's mode "nearest")
+            acc = 0.0
+            for q in range(-r, r + 1):
+                jj = min(max(j + q, 0), m - 1)
+                acc += weights[q + r] * row[jj]
+            out[i, j] = acc
+
+
+def change_transects(frame, k, flat, light, points, directions, offsets, shift, sigma):
+    """The change of ``frame`` since ``flat`` over the ``light`` along transects, smoothed along them.
+
+    ``(S(frame, k, p) - S(flat, k, p - shift)) / S(light, 0, p - shift)`` with
+    ``S`` :func:`sample_transects` at the transects' points ``p`` (``shift``:
+    the drift ``(dx, dy)`` px of ``frame`` from ``flat``; ``light`` is in the
+    view already), 0 where not finite (outside the frame), then
+    ``scipy.ndimage.gaussian_filter1d(., sigma, axis=1, mode="nearest")``
+    (``sigma`` in samples).
+
+    Returns
+    -------
+    ndarray of float64, shape (N, K)
+    """
+    frame, flat = native_frame(frame), native_frame(flat)
+    light = np.ascontiguousarray(light, np.float64) if light.dtype != np.float32 else np.ascontiguousarray(light)
+    p = np.ascontiguousarray(points, np.float64).reshape(-1, 2)
+    d = np.ascontiguousarray(directions, np.float64).reshape(-1, 2)
+    o = np.ascontiguousarray(offsets, np.float64).ravel()
+    radius = int(4.0 * float(sigma) + 0.5)  # (gaussian_filter1d's truncate=4)
+    x = np.arange(-radius, radius + 1)
+    weights = np.exp(-0.5 / float(sigma) ** 2 * x**2)
+    weights = weights / weights.sum()
+    out = np.empty((len(p), len(o)), np.float64)
+    _change_transects(frame, int(k) % 4, flat, light, p[:, 0].copy(), p[:, 1].copy(), p[:, 0] - float(shift[0]),
+                      p[:, 1] - float(shift[1]), d[:, 0].copy(), d[:, 1].copy(), o, weights, out)
     return out
 
 

@@ -367,3 +367,44 @@ def test_the_frame_after_a_flagged_one_is_searched_and_measured():
         v = 0.5 * (out[i].volume_left + out[i].volume_right)
         assert abs(v - s.truth.volume.values[i] / p**3) < tol[i], i
     assert searched[4], searched  # the flag ended the track (steps of 0.15 here are past the track's reach)
+
+
+def test_the_drift_registration_is_skimages_phase_correlation():
+    """_Shift1D (the base's profiles registered frame to frame) against skimage's phase_cross_correlation
+    (normalization None, upsampled 20x) on shifted noisy random walks of many lengths."""
+    from skimage.registration import phase_cross_correlation
+
+    from osmobulge.imaging._facetrace import _Shift1D
+
+    rng = np.random.default_rng(5)
+    for _ in range(60):
+        n = int(rng.integers(100, 1100))
+        x = np.cumsum(rng.normal(size=n + 40))
+        shift = rng.uniform(-15, 15)
+        a = np.interp(np.arange(n) + 20, np.arange(n + 40), x)
+        b = np.interp(np.arange(n) + 20 - shift, np.arange(n + 40), x) + rng.normal(0, 0.3, n)
+        a, b = a - a.mean(), b - b.mean()
+        want = phase_cross_correlation(a, b, upsample_factor=20, normalization=None)[0][0]
+        got = _Shift1D(a).shift(b)
+        assert got == pytest.approx(want, abs=1e-9)
+    # and it is the shift, to its 1/20 px grid, on a periodic profile (b is a moved by +shift)
+    t = np.arange(512) / 512
+    for shift in (-7.33, 0.0, 2.21, 11.86):
+        a, b = (sum(np.sin(2 * np.pi * f * (t - s / 512) + f) / f for f in range(1, 40)) for s in (0.0, shift))
+        assert _Shift1D(a).shift(b) == pytest.approx(-shift, abs=0.026)
+
+
+def test_the_local_light_is_the_gaussian_of_the_frame(edge_dark):
+    """_relative (block means, a coarse Gaussian, linear interpolation back) against scipy's Gaussian of 25 px of
+    the full frame: within 0.2 % more than 25 px inside the frame, 1 % at its edges."""
+    from scipy import ndimage
+
+    from osmobulge.imaging._facetrace import _relative
+
+    img = np.asarray(edge_dark.frames[0], float)
+    want = ndimage.gaussian_filter(img, 25.0, mode="nearest")
+    err = np.abs(_relative(img) / want - 1.0)
+    assert err[25:-25, 25:-25].max() < 2e-3 and err.max() < 1e-2
+    odd = img[:501, :333]  # (sizes that are not multiples of the block)
+    err = np.abs(_relative(odd) / ndimage.gaussian_filter(odd, 25.0, mode="nearest") - 1.0)
+    assert err[25:-25, 25:-25].max() < 2e-3 and err.max() < 1e-2

@@ -7,7 +7,7 @@ import pytest
 from scipy import ndimage as ndi
 
 from osmobulge.imaging._chamber import FrameView, _robust_line, band_edges, step_crossing
-from osmobulge.imaging._kernels import sample_transects
+from osmobulge.imaging._kernels import change_transects, sample_transects
 from osmobulge.imaging._normals import viterbi_path
 from osmobulge.imaging.synthetic import Nuisances, render_frame
 
@@ -186,6 +186,31 @@ def test_sample_transects_inside_the_frame_equal_map_coordinates(k):
     got = sample_transects(frame, k, pts, d, offs)
     want = view.sample(pts[:, :1] + offs[None, :] * d[:, :1], pts[:, 1:] + offs[None, :] * d[:, 1:])
     np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-9)
+
+
+@pytest.mark.parametrize("k", range(4))
+@pytest.mark.parametrize("sigma", [0.35, 1.4, 3.0])
+def test_change_transects_equals_its_numpy_composition(k, sigma):
+    """The silhouette route's change along transects: three samplings (this frame, the flat frame and its light
+    moved by the drift), their ratio (0 where not finite) and scipy's Gaussian along the transects."""
+    rng = np.random.default_rng(20 + k)
+    frame = (rng.random((80, 70)) * 60000).astype(np.uint16)
+    flat = (rng.random((80, 70)) * 60000).astype(np.uint16)
+    h, w = FrameView(frame, k).shape
+    light = (1000.0 + rng.random((h, w)) * 50000).astype(np.float32)  # (in the view)
+    pts = np.c_[rng.uniform(-5, w + 4, 60), rng.uniform(-5, h + 4, 60)]
+    ang = rng.uniform(0, 2 * np.pi, 60)
+    d = np.c_[np.cos(ang), np.sin(ang)]
+    offs = np.arange(12.0, -12.01, -0.5)
+    shift = (1.7, -2.3)
+    got = change_transects(frame, k, flat, light, pts, d, offs, shift, sigma)
+    moved = pts - np.array(shift)
+    v = (sample_transects(frame, k, pts, d, offs) - sample_transects(flat, k, moved, d, offs)) / sample_transects(
+        light, 0, moved, d, offs)
+    v[~np.isfinite(v)] = 0.0
+    want = ndi.gaussian_filter1d(v, sigma, axis=1, mode="nearest")
+    assert (v == 0).any() and (v != 0).mean() > 0.5  # (transects leave the frame and cross it)
+    np.testing.assert_allclose(got, want, rtol=1e-10, atol=1e-12)
 
 
 @pytest.mark.parametrize("seed", range(5))
