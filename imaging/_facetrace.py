@@ -51,7 +51,7 @@ from scipy import ndimage
 from scipy.spatial import cKDTree
 
 from osmobulge.imaging._chamber import ROTATIONS, ChamberGeometry, ChamberNotFound, FrameView, Line, Well
-from osmobulge.imaging._kernels import change_transects, native_frame
+from osmobulge.imaging._kernels import change_transects, longest_run, native_frame, outer_edges
 from osmobulge.imaging._silhouette import FlatMaps, find_walls
 from osmobulge.imaging.geometry import revolution_measures, smooth_profile
 from osmobulge.imaging.trace import FrameTrace, TraceSettings, first_flag, manual_curve
@@ -186,7 +186,7 @@ class _Shift1D:
         whole = np.round(whole * self.up) / self.up
         # the cross-correlation at whole + (j - centre) / up, j = 0 .. region - 1
         off = self.centre - whole * self.up
-        cc = self.kernel @ (prod * np.exp(-2j * np.pi * off * self.freqs))
+        cc = (self.kernel * (prod * np.exp(-2j * np.pi * off * self.freqs))).sum(axis=1)  # (no BLAS: a small product)
         return whole + (int(np.argmax(np.abs(cc))) - self.centre) / self.up
 
 
@@ -323,30 +323,6 @@ def _film_thickness(d, top_row, left, right, guess):
     return float(r0 + k + _vertex(prof[k - 1], prof[k], prof[k + 1]) - top_row)
 
 
-def _edges(prof, thr, window):
-    """Sub-sample index of each ray's outer edge (the rows of ``prof`` run from outside in), nan where none.
-
-    On each row: the first sample above ``thr``, the feature's peak within
-    ``window`` samples of it, and on its outer flank (from 8 samples before the
-    first one to the peak) the steepest rise, located by a parabola through
-    the gradient.
-    """
-    n, m = prof.shape
-    rows = np.arange(n)
-    above = prof > thr
-    i0 = np.argmax(above, axis=1)
-    idx = np.minimum(i0[:, None] + np.arange(window)[None, :], m - 1)
-    pk = idx[rows, np.argmax(np.take_along_axis(prof, idx, axis=1), axis=1)]
-    lo = np.maximum(i0 - 8, 1)
-    end = np.minimum(pk + 1, m - 1)  # the gradient is taken of the samples up to pk + 1 (one-sided there)
-    dp = np.gradient(prof, axis=1)
-    k = np.arange(m)[None, :]
-    steep = np.argmax(np.where((k >= lo[:, None]) & (k <= pk[:, None]), dp, -np.inf), axis=1)
-    right = np.where(steep + 1 == end, prof[rows, end] - prof[rows, end - 1], dp[rows, np.minimum(steep + 1, m - 1)])
-    out = steep + _vertex(dp[rows, np.maximum(steep - 1, 0)], dp[rows, steep], right)
-    return np.where(~above.any(axis=1) | (pk <= lo) | (steep >= end), np.nan, out)
-
-
 def _first_edges(v, t, sign, noise):
     """The outer edge along each profile of ``v`` (rows sampled at ``t`` px, from outside in; the dome's change
     has sign ``sign``) as a position in ``t`` (nan where none), whether found, whether it jumped (more than
@@ -356,7 +332,7 @@ def _first_edges(v, t, sign, noise):
     strength = np.abs(extreme)
     prof = np.clip(sign * v, 0.0, None)
     thr = max(8.0 * noise, 0.2 * float(np.median(prof.max(axis=1))))
-    edge = _edges(prof, thr, int(12.0 / abs(float(t[1] - t[0]))))
+    edge = outer_edges(prof, float(thr), int(12.0 / abs(float(t[1] - t[0]))))
     te = np.interp(edge, np.arange(t.size), t, left=np.nan, right=np.nan)
     found = np.isfinite(te)
     med = ndimage.median_filter(np.where(found, te, np.nanmedian(te) if found.any() else 0.0), size=9,
@@ -486,6 +462,7 @@ class SilhouetteTracer:
         self._reg_ref = tuple(_Shift1D(p) for p in _profiles(img[slice(*self._reg_rows)]))
         self.prev = None
         self._track = None  # the last ok frame's outer face (u, z), px
+        self._splines = []  # the splines of the track's curves (:meth:`_spline`)
         self.searches = 0  # frames whose outer face was searched for by rays (not tracked)
         self.film_mismatch = getattr(self, "film_mismatch", 0.0)  # px (0: l0 measured from these faces)
 
@@ -708,19 +685,30 @@ class SilhouetteTracer:
         is then moved on along its normal by its distance from it (the dome
         keeps its pace: a prediction of the next frame's curve).
         """
-        spl = smooth_profile(self._feet(w, u, z), sigma=sigma)
+        spl = self._spline(w, u, z, sigma)
         s, xy = spl.sample(step=station_step)
         s, xy = s[1:-1], xy[1:-1]  # (not the feet themselves)
         tang = spl.tangent(s)
         nu, nz = -tang[:, 1], tang[:, 0]  # outward
         if before is not None:
-            _, dense = smooth_profile(self._feet(w, *before), sigma=sigma).sample(step=0.5)
+            _, dense = self._spline(w, *before, sigma).sample(step=0.5)
             q = dense[cKDTree(dense).query(xy)[1]]
             lead = (xy[:, 0] - q[:, 0]) * nu + (xy[:, 1] - q[:, 1]) * nz
             xy = xy + lead[:, None] * np.c_[nu, nz]
         offs = np.arange(reach, -reach - 1e-9, -step)  # outside -> inside
         v = sample(np.c_[w.axis_col + xy[:, 0], w.top_row - xy[:, 1]], np.c_[nu, -nz], offs)
         return xy, nu, nz, offs, v
+
+    def _spline(self, w, u, z, sigma):
+        """The smoothing spline (scatter ``sigma``) through the outer-face points ``(u, z)`` with their feet at
+        the rim, kept for the curves of the track: a tracked frame's curve is the next one's curve before (its
+        feet at this frame's rim then, which moves by a hundredth of a px a frame)."""
+        for cu, cz, cs, spl in self._splines:
+            if cu is u and cz is z and cs == sigma:
+                return spl
+        spl = smooth_profile(self._feet(w, u, z), sigma=sigma)
+        self._splines = self._splines[-2:] + [(u, z, sigma, spl)]  # (this frame's three)
+        return spl
 
     def _along_normals(self, sample, w, u, z, sign, thr):
         """Outer-face edges along the normals of the curve through ``(u, z)``, every 1.5 px; figures.
@@ -732,15 +720,12 @@ class SilhouetteTracer:
         xy, nu, nz, offs, v = self._normals(sample, w, u, z, _NORMAL_REACH, sigma=1.0)
         prof = np.clip(sign * v, 0.0, None)
         window = int(12.0 / _NORMAL_STEP)
-        edge = _edges(prof, thr, window)
+        edge = outer_edges(prof, float(thr), window)
         o = np.interp(edge, np.arange(offs.size), offs, left=np.nan, right=np.nan)
         found = np.isfinite(o)
         jump = found & (np.abs(o) > _JUMP_PX)
         good = found & ~jump
-        run = longest = 0
-        for ok in found:
-            run = 0 if ok else run + 1
-            longest = max(longest, run)
+        longest = longest_run(~found, np.ones(found.size))  # (stations)
         # the dome reaching the field's edge: part of it is not in the frame
         cols, rows = w.axis_col + xy[:, 0], w.top_row - xy[:, 1]
         margin = float(np.min([cols.min(), self.view_shape[1] - 1 - cols.max(), rows.min()]))

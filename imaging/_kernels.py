@@ -30,7 +30,7 @@ from numba import njit, types
 from numba.core import cgutils
 from numba.extending import intrinsic
 
-__all__ = ["sample_transects", "change_transects", "ends_noise", "band_edges_rows", "step_crossing_rows",
+__all__ = ["sample_transects", "change_transects", "outer_edges", "ends_noise", "band_edges_rows", "step_crossing_rows",
            "robust_line", "line_band",
            "viterbi_rows", "lsq_spline", "fill_rows_nanmedian", "nanmedian", "column_nanmedian", "longest_run",
            "running_percentile",
@@ -180,16 +180,18 @@ def _change_transects(frame, k, flat, light, px, py, qx, qy, dx, dy, offsets, we
     _sample_transects(flat, k, qx, qy, dx, dy, offsets, ref)
     _sample_transects(light, 0, qx, qy, dx, dy, offsets, bg)
     r = (weights.size - 1) // 2
-    row = np.empty(m)
+    row = np.empty(m + 2 * r)  # the ratio with its ends repeated r times (scipy's mode "nearest")
     for i in range(n):
         for j in range(m):
             v = (out[i, j] - ref[i, j]) / bg[i, j]
-            row[j] = v if np.isfinite(v) else 0.0
-        for j in range(m):  # a Gaussian along the transect, the ends repeated (scipy's mode "nearest")
+            row[r + j] = v if np.isfinite(v) else 0.0
+        for j in range(r):
+            row[j] = row[r]
+            row[r + m + j] = row[r + m - 1]
+        for j in range(m):  # a Gaussian along the transect
             acc = 0.0
-            for q in range(-r, r + 1):
-                jj = min(max(j + q, 0), m - 1)
-                acc += weights[q + r] * row[jj]
+            for q in range(2 * r + 1):
+                acc += weights[q] * row[j + q]
             out[i, j] = acc
 
 
@@ -219,6 +221,62 @@ def change_transects(frame, k, flat, light, points, directions, offsets, shift, 
     out = np.empty((len(p), len(o)), np.float64)
     _change_transects(frame, int(k) % 4, flat, light, p[:, 0].copy(), p[:, 1].copy(), p[:, 0] - float(shift[0]),
                       p[:, 1] - float(shift[1]), d[:, 0].copy(), d[:, 1].copy(), o, weights, out)
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _grad(p, i, k, m):
+    """``np.gradient(p[i])[k]`` (first-order one-sided at the ends)."""
+    if k == 0:
+        return p[i, 1] - p[i, 0]
+    if k == m - 1:
+        return p[i, m - 1] - p[i, m - 2]
+    return (p[i, k + 1] - p[i, k - 1]) / 2.0
+
+
+@njit(cache=True, nogil=True)
+def outer_edges(prof, thr, window):
+    """Sub-sample index of each row's outer edge (the rows of ``prof`` run from outside in), nan where none.
+
+    On each row: the first sample above ``thr``, the feature's peak within
+    ``window`` samples of it, and on its outer flank (from 8 samples before the
+    first one to the peak) the steepest rise of ``np.gradient``, located by a
+    parabola through the gradient's three values around it (the last one
+    one-sided at the peak's next sample).  Rows need at least 2 samples.
+    """
+    n, m = prof.shape
+    out = np.full(n, np.nan)
+    for i in range(n):
+        i0 = -1
+        for j in range(m):
+            if prof[i, j] > thr:
+                i0 = j
+                break
+        if i0 < 0:
+            continue
+        pk, best = i0, prof[i, i0]
+        for q in range(1, window):
+            j = min(i0 + q, m - 1)
+            if prof[i, j] > best:
+                pk, best = j, prof[i, j]
+        lo = max(i0 - 8, 1)
+        end = min(pk + 1, m - 1)
+        if pk <= lo:
+            continue
+        steep, top = lo, _grad(prof, i, lo, m)
+        for k in range(lo + 1, pk + 1):
+            g = _grad(prof, i, k, m)
+            if g > top:
+                steep, top = k, g
+        if steep >= end:
+            continue
+        right = prof[i, end] - prof[i, end - 1] if steep + 1 == end else _grad(prof, i, min(steep + 1, m - 1), m)
+        a = _grad(prof, i, max(steep - 1, 0), m)
+        den = a - 2.0 * top + right
+        off = 0.0
+        if den < 0.0:
+            off = min(max(0.5 * (a - right) / den, -0.5), 0.5)
+        out[i] = steep + off
     return out
 
 

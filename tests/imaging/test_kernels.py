@@ -7,7 +7,7 @@ import pytest
 from scipy import ndimage as ndi
 
 from osmobulge.imaging._chamber import FrameView, _robust_line, band_edges, step_crossing
-from osmobulge.imaging._kernels import change_transects, sample_transects
+from osmobulge.imaging._kernels import change_transects, outer_edges, sample_transects
 from osmobulge.imaging._normals import viterbi_path
 from osmobulge.imaging.synthetic import Nuisances, render_frame
 
@@ -141,6 +141,27 @@ def ref_robust_line(x, y, *, iters=4, clip=3.0, floor=0.1):
     return a, b, rms, ok
 
 
+def _outer_edges_numpy(prof, thr, window):
+    """The silhouette route's outer edges as numpy did them (``_facetrace._edges`` before it was compiled)."""
+    n, m = prof.shape
+    rows = np.arange(n)
+    above = prof > thr
+    i0 = np.argmax(above, axis=1)
+    idx = np.minimum(i0[:, None] + np.arange(window)[None, :], m - 1)
+    pk = idx[rows, np.argmax(np.take_along_axis(prof, idx, axis=1), axis=1)]
+    lo = np.maximum(i0 - 8, 1)
+    end = np.minimum(pk + 1, m - 1)
+    dp = np.gradient(prof, axis=1)
+    k = np.arange(m)[None, :]
+    steep = np.argmax(np.where((k >= lo[:, None]) & (k <= pk[:, None]), dp, -np.inf), axis=1)
+    right = np.where(steep + 1 == end, prof[rows, end] - prof[rows, end - 1], dp[rows, np.minimum(steep + 1, m - 1)])
+    a, b = dp[rows, np.maximum(steep - 1, 0)], dp[rows, steep]
+    den = a - 2 * b + right
+    with np.errstate(divide="ignore", invalid="ignore"):
+        off = np.where(den < 0, np.clip(0.5 * (a - right) / den, -0.5, 0.5), 0.0)
+    return np.where(~above.any(axis=1) | (pk <= lo) | (steep >= end), np.nan, steep + off)
+
+
 # ------------------------------------------------------------------------ tests
 @pytest.mark.parametrize("k", range(4))
 @pytest.mark.parametrize("dtype", [np.uint8, np.uint16, np.float32, np.float64])
@@ -211,6 +232,28 @@ def test_change_transects_equals_its_numpy_composition(k, sigma):
     want = ndi.gaussian_filter1d(v, sigma, axis=1, mode="nearest")
     assert (v == 0).any() and (v != 0).mean() > 0.5  # (transects leave the frame and cross it)
     np.testing.assert_allclose(got, want, rtol=1e-10, atol=1e-12)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_outer_edges_equals_numpy_reference(seed):
+    """Blurred steps and peaks at random places (some rows without a feature, some at the ends, plateaus)."""
+    rng = np.random.default_rng(seed)
+    n, m = 400, 65 if seed % 2 else 121
+    x = np.arange(m, dtype=float)
+    at = rng.uniform(-5, m + 5, n)[:, None]
+    width = rng.uniform(0.5, 6, n)[:, None]
+    prof = rng.uniform(0, 2, n)[:, None] * np.exp(-0.5 * ((x - at) / width) ** 2)
+    prof += np.clip(np.tanh((x - at - 3) / width), 0, None) * rng.uniform(0, 1, n)[:, None]
+    prof += np.abs(rng.normal(0, 0.02, prof.shape))
+    prof[::17] = 0.0  # no feature
+    prof[5::23, 10:20] = 1.0  # a plateau (ties)
+    prof = np.round(prof, 2 if seed == 3 else 12)  # (more ties)
+    for thr, window in ((0.3, int(12 / 0.25)), (0.05, 24), (0.8, 3)):
+        got = outer_edges(prof, thr, window)
+        want = _outer_edges_numpy(prof, thr, window)
+        assert np.isnan(got).sum() > 10 and np.isfinite(got).sum() > 100
+        np.testing.assert_array_equal(np.isnan(got), np.isnan(want))
+        np.testing.assert_allclose(got[np.isfinite(got)], want[np.isfinite(want)], rtol=0, atol=1e-12)
 
 
 @pytest.mark.parametrize("seed", range(5))
