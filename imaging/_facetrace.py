@@ -344,6 +344,17 @@ def _first_edges(v, t, sign, noise):
     return te, found, jump, thr, figs
 
 
+def _polyline_distance(points, line):
+    """Distance (px) of each point from the polyline through ``line`` (its nearest vertex's two segments)."""
+    i = cKDTree(line).query(points)[1]
+    best = np.hypot(*(points - line[i]).T)
+    for a, b in ((np.maximum(i - 1, 0), i), (i, np.minimum(i + 1, len(line) - 1))):
+        d = line[b] - line[a]
+        t = np.clip(np.sum((points - line[a]) * d, axis=1) / np.maximum(np.sum(d * d, axis=1), 1e-300), 0.0, 1.0)
+        best = np.minimum(best, np.hypot(*(points - line[a] - t[:, None] * d).T))
+    return best
+
+
 def _thickness(u, z, rim_l, rim_r, l0):
     r"""The film's thickness along a mid-surface curve (left rim -> right rim), px.
 
@@ -771,9 +782,7 @@ class SilhouetteTracer:
         rim_l, rim_r = w.axis_col - w.left, w.right - w.axis_col
         spl = smooth_profile(self._feet(w, u, z), sigma=0.5)  # the outer face meets the top face at the rim
         s, xy = spl.sample(step=1.0)
-        # the traced points' distance from the curve (sampled at 0.2 px)
-        _, dense = spl.sample(step=0.2)
-        resid = float(np.sqrt(np.mean(cKDTree(dense).query(np.c_[u, z])[0] ** 2)))
+        resid = float(np.sqrt(np.mean(_polyline_distance(np.c_[u, z], xy) ** 2)))  # (the curve every px)
         tang = spl.tangent(s)
         normal = np.c_[-tang[:, 1], tang[:, 0]]  # outward for a curve left rim -> over the top -> right rim
         l0, rim = self.l0, 0.5 * (rim_l + rim_r)

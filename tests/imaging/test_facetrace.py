@@ -408,3 +408,16 @@ def test_the_local_light_is_the_gaussian_of_the_frame(edge_dark):
     odd = img[:501, :333]  # (sizes that are not multiples of the block)
     err = np.abs(_relative(odd) / ndimage.gaussian_filter(odd, 25.0, mode="nearest") - 1.0)
     assert err[25:-25, 25:-25].max() < 2e-3 and err.max() < 1e-2
+
+
+def test_polyline_distance_is_the_distance_from_the_curve():
+    """Points at known distances inside and outside a circle of 300 px, against the circle drawn every px."""
+    from osmobulge.imaging._facetrace import _polyline_distance
+
+    rng = np.random.default_rng(2)
+    phi = np.linspace(0.0, np.pi, int(np.pi * 300))
+    line = 300.0 * np.c_[np.cos(phi), np.sin(phi)]
+    at, off = rng.uniform(0.05, np.pi - 0.05, 300), rng.uniform(-2.0, 2.0, 300)
+    pts = (300.0 + off)[:, None] * np.c_[np.cos(at), np.sin(at)]
+    np.testing.assert_allclose(_polyline_distance(pts, line), np.abs(off), atol=2e-3)  # (the chords' sagitta)
+    assert _polyline_distance(np.array([[-310.0, -5.0]]), line)[0] == pytest.approx(np.hypot(10.0, 5.0))  # past an end
