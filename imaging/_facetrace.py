@@ -604,7 +604,9 @@ class SilhouetteTracer:
         u = z = None
         if self._track is not None:  # along the normals of the last frame's outer face
             u, z, figs = self._tracked(sample, w, noise)
-        if u is None:  # the full search: rays from the rim plane's centre
+        if u is None and dx == 0.0 and dy == 0.0 and np.array_equal(frame, self._flat):
+            figs = {"dome_contrast": 0.0}  # (the reference frame itself: its change is 0 on every ray)
+        elif u is None:  # the full search: rays from the rim plane's centre
             self.searches += 1
             u, z, figs = self._outer_face(sample, w, noise)
         out.figures.update(figs)

@@ -316,8 +316,23 @@ def test_tracked_frames_agree_with_the_full_search():
         assert abs(va - vb) < 0.1 * tol[i]
         assert abs(va - s.truth.volume.values[i] / p**3) < tol[i]
         assert abs(a.geometry.rim_radius - b.geometry.rim_radius) < 0.01
-    # (the flat frame is searched too: no dome there)
-    assert full.searches == len(s.frames) and tracked.searches <= 3
+    # (the flat reference frame itself is not searched: its change is 0 on every ray)
+    assert full.searches == len(s.frames) - 1 and tracked.searches <= 3
+
+
+def test_the_reference_frame_is_flat_without_a_search(edge_dark):
+    """The first frame (the reference itself) is the flat film without the ray search, as the search finds it
+    in a copy that differs by a count here and there."""
+    tr = SilhouetteTracer(edge_dark.frames[0], **_known(edge_dark))
+    a = tr.process(edge_dark.frames[0], 0)
+    assert tr.searches == 0
+    copy = np.asarray(edge_dark.frames[0]).copy()
+    copy[::7, ::5] += 1
+    b = tr.process(copy, 0)
+    assert tr.searches == 1
+    for o in (a, b):
+        assert (o.mode, o.flag, o.volume_left, o.volume_right) == ("flat", "ok", 0.0, 0.0)
+    assert a.figures["dome_contrast"] == 0.0 and b.figures["dome_contrast"] < 10.0
 
 
 def test_a_dome_that_turns_and_shrinks_is_tracked_back():
