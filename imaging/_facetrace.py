@@ -85,6 +85,8 @@ _FIELD_MARGIN_PX = 3.0
 #: columns beside the walls kept when a later frame's walls are found (their zone is inside the well, the light
 #: just outside them 4-12 px out; find_walls looks for them within 20 px of the expected columns)
 _WALL_MARGIN = 40
+#: columns inside each wall kept with them (find_walls' peak search, 20 px, and its 3-column smoothing)
+_WALL_INSIDE = 26
 #: rows of the base the walls are followed down, as fractions of the well depth (more rows than
 #: find_walls' default, which must also work with a guessed depth)
 _STRIP = (0.1, 0.8)
@@ -567,16 +569,25 @@ class SilhouetteTracer:
         top = w0.top_row + dy
         lo = max(int(top + self.l0 + _STRIP[0] * self.depth) - 2, 0)
         hi = min(int(top + self.l0 + _STRIP[1] * self.depth) + 3, img.shape[0])
-        c0 = max(int(w0.left + dx) - _WALL_MARGIN, 0)
-        c1 = min(int(w0.right + dx) + _WALL_MARGIN, img.shape[1])
+        # each wall's columns: _WALL_MARGIN outside it (its edge and the light beyond), _WALL_INSIDE inside (where
+        # find_walls looks for its zone's peak, within 20 px of the expected column); the two side by side
+        left, right = w0.left + dx, w0.right + dx
+        spans = [(max(int(left) - _WALL_MARGIN, 0), int(left) + _WALL_INSIDE),
+                 (int(right) - _WALL_INSIDE, min(int(right) + _WALL_MARGIN, img.shape[1]))]
+        if spans[0][1] >= spans[1][0]:  # (a narrow well: its columns in one piece)
+            spans = [(spans[0][0], spans[1][1])]
+        cols = np.concatenate([np.arange(a, b) for a, b in spans])
+        width0 = spans[0][1] - spans[0][0]
         # the local light: the flat frame's, moved by the drift to the pixel (it varies over tens of px; the
         # walls' half level lies between the zone's extreme and the light just outside, whatever its scale)
         rows = np.clip(np.arange(lo, hi) - int(round(dy)), 0, img.shape[0] - 1)
-        cols = np.clip(np.arange(c0, c1) - int(round(dx)), 0, img.shape[1] - 1)
-        w = find_walls(img[lo:hi, c0:c1], self.l0, depth_px=self.depth, top_row=top - lo,
-                       strip=_STRIP, near=(w0.left + dx - c0, w0.right + dx - c0), light=self._bg[np.ix_(rows, cols)])
+        moved = np.clip(cols - int(round(dx)), 0, img.shape[1] - 1)
+        crop = np.concatenate([img[lo:hi, a:b] for a, b in spans], axis=1)
+        c0, c1 = spans[0][0], spans[-1][0] - (width0 if len(spans) == 2 else 0)  # (crop column -> view column)
+        w = find_walls(crop, self.l0, depth_px=self.depth, top_row=top - lo, strip=_STRIP,
+                       near=(left - c0, right - c1), light=self._bg[np.ix_(rows, moved)])
         return replace(w, top_row=w.top_row + lo, base_row=w.base_row + lo, left=w.left + c0,
-                       right=w.right + c0), dx, dy
+                       right=w.right + c1), dx, dy
 
     def process(self, frame, index=0, *, guide=None, manual=None):
         """Measure one frame (``guide`` is not needed by this route and ignored); returns a FrameTrace."""

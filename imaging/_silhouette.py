@@ -22,10 +22,10 @@ optics looks against their true well radius.
 
 from __future__ import annotations
 
-import warnings
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 from scipy import ndimage
 
 from osmobulge.imaging._chamber import ChamberNotFound
@@ -91,8 +91,7 @@ class FlatMaps:
         self.light = np.asarray(light, float)
         if self.light.shape != self.values.shape:
             raise ValueError(f"light has shape {self.light.shape}, the frame {self.values.shape}")
-        self.deviation = _scaled_deviation(self.values, self.light)
-        self.size = np.abs(self.deviation)
+        self.deviation, self.size = _scaled_deviation(self.values, self.light)
         self._scores = {}
 
     def view(self, k):
@@ -105,19 +104,21 @@ class FlatMaps:
         key = (k % 2, float(l0_px))
         if key not in self._scores:
             k0 = k % 2
-            self._scores[key] = (np.percentile(np.rot90(self.size, k0), 15, axis=1),
+            self._scores[key] = (_percentile_rows(np.rot90(self.size, k0), 15),
                                  _line_score(np.rot90(self.values, k0), l0_px))
         rows, line = self._scores[key]
         return (rows, line) if k % 4 < 2 else (rows[::-1], line[::-1])
 
 
 def _scaled_deviation(img, bg):
-    """(img - light) / light over the 99.5th percentile of its size (what the silhouettes are found on)."""
-    sd = (img - bg) / np.maximum(bg, 1e-6 * max(float(bg.max()), 1e-30))
-    scale = np.percentile(np.abs(sd), 99.5)
+    """(img - light) / light over the 99.5th percentile of its size (what the silhouettes are found on), and its
+    size (absolute value)."""
+    floor, scale = _size_percentile(img, bg, *_rank(img.size, 99.5))
     if scale <= 1e-9:  # relative deviation: nothing but rounding
         raise ChamberNotFound("the frame is uniform: no top face or walls to find")
-    return sd / scale
+    sd, size = np.empty(img.shape), np.empty(img.shape)
+    _scaled(img, bg, floor, scale, sd, size)
+    return sd, size
 
 
 def find_walls(frame, l0_px, *, strip=(0.15, 0.6), depth_px=None, min_width=40, top_row=None,
@@ -176,8 +177,7 @@ def find_walls(frame, l0_px, *, strip=(0.15, 0.6), depth_px=None, min_width=40, 
         bg = ndimage.gaussian_filter(img, 25.0, mode="nearest") if light is None else np.asarray(light, float)
         if bg.shape != img.shape:
             raise ValueError(f"light has shape {bg.shape}, the frame {img.shape}")
-        sd = _scaled_deviation(img, bg)
-        d = np.abs(sd)
+        sd, d = _scaled_deviation(img, bg)
     if top_row is None:
         top_row = _top_face(d, l0_px, img, near=top_near, scores=scores)
     base_row = top_row + l0_px
@@ -188,7 +188,7 @@ def find_walls(frame, l0_px, *, strip=(0.15, 0.6), depth_px=None, min_width=40, 
     if r1 - r0 < 5:
         raise ChamberNotFound("too few base rows below the membrane to find the walls")
     band = ndimage.uniform_filter1d(d[r0:r1], 3, axis=1)
-    col_score = np.median(band, axis=0)
+    col_score = _column_medians(band)  # (np.median(band, axis=0))
     if near is not None:  # the silhouettes nearest the expected walls
         half = max(min_width // 2, 3)
         peaks = []
@@ -224,20 +224,22 @@ def _line_score(img, l0_px):
     trials are scored too.
     """
     h, w = img.shape
-    s = img[:, : w - w % 4].reshape(h, -1, 4).mean(axis=2)
+    s = np.empty((h, w // 4))
+    _column_means(img, s, abs(img.strides[1]) <= abs(img.strides[0]))
     best = np.zeros(h)
+    finite = bool(np.isfinite(s).all())
+    med = np.empty_like(s)
+    lo, t = _rank(s.shape[1], 15)
     for thick in (l0_px, 0.5 * l0_px, 0.25 * l0_px):
         gap, win = max(int(round(0.55 * thick)), 2), max(int(round(0.4 * thick)), 3) | 1  # (odd: centred)
         off = gap + win // 2
         if off >= h:
             continue
-        med = ndimage.median_filter(s, size=(win, 1), mode="nearest")
-        up = np.r_[np.repeat(med[:1], off, axis=0), med[:-off]]  # the level above each row
-        dn = np.r_[med[off:], np.repeat(med[-1:], off, axis=0)]  # and below it
-        a = s / np.maximum(up, 1e-12) - 1.0
-        b = s / np.maximum(dn, 1e-12) - 1.0
-        r = np.where(a * b > 0, np.minimum(np.abs(a), np.abs(b)), 0.0)
-        best = np.maximum(best, np.percentile(r, 15, axis=1))
+        if finite:  # (the window's median is one of its values: the same whatever computes it)
+            _running_median(s, win, med)
+        else:
+            med = ndimage.median_filter(s, size=(win, 1), mode="nearest")
+        _line_rows(s, med, off, lo, t, best)
     return best
 
 
@@ -296,44 +298,18 @@ def _strongest(col_score, width, min_width):
     return peaks
 
 
-def _half_crossings(prof, pk, base=None):
-    """:func:`_half_crossing` of each row of ``prof`` from its ``pk`` walking to higher indices (nan where none).
-
-    ``base``: per row (default 0).
-    """
-    n, m = prof.shape
-    rows = np.arange(n)
-    top = prof[rows, pk]
-    half = 0.5 * (top + (0.0 if base is None else base))
-    k = np.arange(m)[None, :]
-    below = (k > pk[:, None]) & ~(prof > half[:, None])  # (nan stops the walk, as in _half_crossing)
-    j = np.argmax(below, axis=1)
-    ok = (top > half) & below[rows, j]
-    jm = np.maximum(j - 1, 0)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        e = jm + (prof[rows, jm] - half) / (prof[rows, jm] - prof[rows, j])
-    return np.where(ok, e, np.nan)
-
-
 def _wall_edges(sd, c):
     """Per row of ``sd`` (signed deviation, walking outwards to higher indices), the wall's outer half-level edge
-    from its zone's extreme within 3 columns of ``c``: :func:`_fit_walls`' rule, on all the rows at once."""
-    n, m = sd.shape
-    rows = np.arange(n)
-    lo = max(c - 3, 0)
-    pk = lo + np.argmax(np.abs(sd[:, lo : c + 4]), axis=1)
-    prof = np.sign(sd[rows, pk])[:, None] * sd
-    e = _half_crossings(prof, pk)
-    # the light just outside the wall: 4-12 px out
-    idx = np.round(np.nan_to_num(e, nan=-100.0)).astype(int)[:, None] + np.arange(4, 13)[None, :]
-    valid = (idx >= 0) & (idx < m) & np.isfinite(e)[:, None]
-    outside = np.where(valid, prof[rows[:, None], np.clip(idx, 0, m - 1)], np.nan)
-    enough = valid.sum(axis=1) >= 4
-    with np.errstate(invalid="ignore"), warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)  # (all-nan rows: no edge)
-        base = np.nanmedian(outside, axis=1)
-    e2 = _half_crossings(prof, pk, np.where(enough, base, 0.0))
-    return np.where(enough & np.isfinite(e2), e2, e)
+    from its zone's extreme within 3 columns of ``c``: :func:`_fit_walls`' rule, on all the rows at once.
+
+    The zone's extreme is the first largest ``|sd|`` in the row's columns
+    ``c - 3 .. c + 3``; the edge, the first crossing (:func:`_half_crossing`) of
+    the level half-way from it to 0 and then, with the median of the light
+    just outside the wall (4-12 px past that crossing, at least 4 of them
+    inside the row) as the base, half-way from it to that base (the first
+    crossing when there is none); nan where there is no crossing.
+    """
+    return _edges(sd, c)
 
 
 def _fit_walls(sd, peaks, r0, r1, top_row, base_row):
@@ -366,3 +342,431 @@ def _fit_walls(sd, peaks, r0, r1, top_row, base_row):
         raise ChamberNotFound(f"the wall silhouettes are not straight lines (row scatter {max(res):.2f} px > "
                               f"{MAX_WALL_RMS} px): not walls, or a look this search cannot read")
     return SilhouetteWalls(float(top_row), float(base_row), fits[0], fits[1], max(res))
+
+
+# ---------------------------------------------------------------------- compiled inner loops
+# Each does what the numpy/scipy expression in its docstring does, with the same result to the bit (checked in
+# tests/imaging/test_silhouette.py), without its sorts, copies and temporary arrays; those that divide take
+# numpy's error model (x / 0 is inf or nan, not ZeroDivisionError).
+
+
+def _rank(n, q):
+    """numpy's linear rule for the ``q``-th percentile of ``n`` values: the sorted values' index below it and the
+    weight of the next one (``np.percentile``'s own arithmetic)."""
+    v = (n - 1) * np.true_divide(q, 100)
+    lo = np.floor(v)
+    return int(min(lo, n - 1)), float(v - lo)
+
+
+def _percentile_rows(a, q):
+    """``np.percentile(a, q, axis=1)`` of a 2-D array (of a turned view: read along its stored rows)."""
+    if abs(a.strides[0]) < abs(a.strides[1]):
+        return _column_percentiles(a.T, *_rank(a.shape[1], q))
+    return _row_percentiles(a, *_rank(a.shape[1], q))
+
+
+@njit(cache=True, nogil=True)
+def _select2(a, n, k, b):
+    """The ``k``-th and ``k + 1``-th smallest values of ``a[:n]`` (no nan, ``k + 1 < n``; ``a`` and ``b``, of at
+    least ``n``, are overwritten): quickselect, each pass splitting without branches."""
+    smp = np.empty(9)
+    while n > 16:
+        if n < 64:
+            x0, x1, x2 = a[0], a[n >> 1], a[n - 1]
+            p = max(min(x0, x1), min(max(x0, x1), x2))  # (median of three)
+        else:  # of nine evenly spaced (sorted), the one just past the k-th's expected place towards the middle
+            for i in range(9):
+                x = a[(2 * i + 1) * n // 18]
+                j = i - 1
+                while j >= 0 and smp[j] > x:
+                    smp[j + 1] = smp[j]
+                    j -= 1
+                smp[j + 1] = x
+            f = 10.0 * (k + 0.5) / n - 1.0
+            p = smp[min(max(int(f + 1.5) if f < 4.0 else int(f - 0.5), 0), 8)]
+        n_lt = n_gt = 0
+        for j in range(n):  # below the pivot to the front of a, above it to b
+            x = a[j]
+            a[n_lt] = x
+            b[n_gt] = x
+            n_lt += x < p
+            n_gt += x > p
+        n_le = n - n_gt
+        if k + 1 < n_lt:
+            n = n_lt
+        elif k + 1 == n_lt:
+            m = a[0]
+            for j in range(1, n_lt):
+                m = max(m, a[j])
+            return m, p
+        elif k + 1 < n_le:
+            return p, p
+        elif k + 1 == n_le:
+            m = b[0]
+            for j in range(1, n_gt):
+                m = min(m, b[j])
+            return p, m
+        else:
+            k -= n_le
+            n = n_gt
+            a, b = b, a
+    for i in range(1, n):  # (insertion sort)
+        x = a[i]
+        j = i - 1
+        while j >= 0 and a[j] > x:
+            a[j + 1] = a[j]
+            j -= 1
+        a[j + 1] = x
+    return a[k], a[k + 1]
+
+
+@njit(cache=True, nogil=True)
+def _column_medians(a):
+    """``np.median(a, axis=0)`` of a 2-D array."""
+    m, n = a.shape
+    out = np.empty(n)
+    cols = np.empty((n, max(m, 1)))
+    for i in range(m):
+        for j in range(n):
+            cols[j, i] = a[i, j]
+    b = np.empty(max(m, 1))
+    for j in range(n):
+        v = cols[j]
+        nan = m == 0
+        for i in range(m):
+            nan |= np.isnan(v[i])
+        if nan:
+            out[j] = np.nan
+        elif m == 1:
+            out[j] = v[0]
+        elif m % 2:
+            out[j] = _select2(v, m, m // 2, b)[0]
+        else:
+            x0, x1 = _select2(v, m, m // 2 - 1, b)
+            out[j] = (x0 + x1) / 2.0
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _percentile_of(a, n, lo, t, b):
+    """The percentile of rank ``lo`` and weight ``t`` (:func:`_rank`) of ``a[:n]`` (no nan; ``a`` and ``b``
+    overwritten), interpolated as numpy's ``_lerp``."""
+    if lo + 1 < n:
+        x0, x1 = _select2(a, n, lo, b)
+    else:  # (the largest)
+        x0 = a[0]
+        for j in range(1, n):
+            x0 = max(x0, a[j])
+        x1 = x0
+    return _lerp(x0, x1, t)
+
+
+@njit(cache=True, nogil=True)
+def _lerp(x0, x1, t):
+    """numpy's ``_lerp``: ``x0`` interpolated by ``t`` towards ``x1``."""
+    d = x1 - x0
+    if t >= 0.5:
+        return x1 - d * (1.0 - t)
+    return x0 + d * t
+
+
+@njit(cache=True, nogil=True)
+def _row_percentiles(a, lo, t):
+    """Each row's percentile of rank ``lo`` and weight ``t`` (:func:`_rank`): ``np.percentile(a, q, axis=1)``."""
+    m, n = a.shape
+    out = np.empty(m)
+    v = np.empty(max(n, 1))
+    b = np.empty(max(n, 1))
+    for i in range(m):
+        nan = n == 0
+        for j in range(n):
+            v[j] = a[i, j]
+            nan |= np.isnan(v[j])
+        out[i] = np.nan if nan else _percentile_of(v, n, lo, t, b)
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _column_percentiles(a, lo, t):
+    """:func:`_row_percentiles` of ``a.T`` (``np.percentile(a, q, axis=0)``), ``a`` read along its rows: its
+    columns copied 32 at a time (down a column, a power-of-two stride would make the cache forget them)."""
+    m, n = a.shape
+    out = np.empty(n)
+    cols = np.empty((32, m + 8))  # (rows 8 apart from a power of two)
+    b = np.empty(max(m, 1))
+    for j0 in range(0, n, 32):
+        nj = min(32, n - j0)
+        for i in range(m):
+            for q in range(nj):
+                cols[q, i] = a[i, j0 + q]
+        for q in range(nj):
+            v = cols[q]
+            nan = m == 0
+            for i in range(m):
+                nan |= np.isnan(v[i])
+            out[j0 + q] = np.nan if nan else _percentile_of(v, m, lo, t, b)
+    return out
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _size_percentile(img, bg, lo, t):
+    """:func:`_scaled_deviation`'s floor of the light, ``1e-6 * max(bg.max(), 1e-30)``, and percentile (rank
+    ``lo``, weight ``t``) of ``np.abs((img - bg) / np.maximum(bg, floor))``.
+
+    One pass over the frame when no light is below the floor (as
+    ``_relative``'s): only the sizes between two order statistics of a
+    sample of them that bound the two it needs (checked by their counts)
+    are kept to select from.
+    """
+    m, n = img.shape
+    size = m * n
+    if size == 0:
+        return np.nan, np.nan
+    hi = min(lo + 1, size - 1)
+    below, above = -np.inf, np.inf
+    step = size // 4096
+    if step >= 4:
+        ns = size // step
+        smp = np.empty(ns)
+        nan = False
+        for s in range(ns):
+            i, j = divmod(s * step, n)
+            smp[s] = abs((img[i, j] - bg[i, j]) / bg[i, j])
+            nan |= np.isnan(smp[s])
+        if not nan:
+            margin = int(4.0 * np.sqrt(ns)) + 8
+            r0, r1 = lo * ns // size - margin, hi * ns // size + margin
+            scratch = np.empty(ns)
+            below = -np.inf if r0 < 0 else _select2(smp, ns, r0, scratch)[0]
+            above = np.inf if r1 >= ns - 1 else _select2(smp, ns, r1, scratch)[0]
+    keep = np.empty(size)
+    k = n_lt = n_gt = 0
+    top, low, nan = -np.inf, np.inf, False
+    for i in range(m):
+        for j in range(n):
+            b = bg[i, j]
+            if b > top:
+                top = b
+            if b < low:
+                low = b
+            nan |= np.isnan(b)
+            x = abs((img[i, j] - b) / b)
+            if x < below:
+                n_lt += 1
+            elif x > above:
+                n_gt += 1
+            else:  # (and nan)
+                keep[k] = x
+                k += 1
+    floor = np.nan if nan else 1e-6 * (1e-30 if top < 1e-30 else top)
+    if nan or low < floor or not (n_lt <= lo and hi <= size - 1 - n_gt):  # all of them, with the floor
+        k = n_lt = 0
+        for i in range(m):
+            for j in range(n):
+                b = bg[i, j]
+                if b < floor or nan:
+                    b = floor
+                keep[k] = abs((img[i, j] - bg[i, j]) / b)
+                k += 1
+    for i in range(k):
+        if np.isnan(keep[i]):
+            return floor, np.nan
+    return floor, _percentile_of(keep, k, lo - n_lt, t, np.empty(k))
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _scaled(img, bg, floor, scale, sd, size):
+    """``sd = (img - bg) / np.maximum(bg, floor) / scale`` and ``size = np.abs(sd)``."""
+    m, n = img.shape
+    nan = np.isnan(floor)
+    for i in range(m):
+        for j in range(n):
+            b = bg[i, j]
+            if b < floor or nan:  # (np.maximum: nan if either is)
+                b = floor
+            x = (img[i, j] - bg[i, j]) / b / scale
+            sd[i, j] = x
+            size[i, j] = abs(x)
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _column_means(img, s, by_rows):
+    """``s = img[:, :4 * w].reshape(h, w, 4).mean(axis=2)`` (numpy's order of the sum), ``s`` of shape (h, w);
+    ``img`` read along its rows (``by_rows``) or its columns."""
+    h, w = s.shape
+    if by_rows:
+        for i in range(h):
+            for c in range(w):
+                s[i, c] = (((img[i, 4 * c] + img[i, 4 * c + 1]) + img[i, 4 * c + 2]) + img[i, 4 * c + 3]) / 4.0
+    else:
+        for c in range(w):
+            for i in range(h):
+                s[i, c] = (((img[i, 4 * c] + img[i, 4 * c + 1]) + img[i, 4 * c + 2]) + img[i, 4 * c + 3]) / 4.0
+
+
+@njit(cache=True, nogil=True)
+def _running_median(s, win, out):
+    """``out = ndimage.median_filter(s, size=(win, 1), mode="nearest")`` of a finite 2-D array, odd ``win``.
+
+    Each column's window is kept sorted (``a[:, c]``) as it slides down, one
+    value out and one in, by the same operations for all the columns (no
+    branches: the compiler vectorises them).  Windows of 3 and 5: their
+    medians by comparisons.
+    """
+    h, w = s.shape
+    if win == 3 or win == 5:
+        for i in range(h):
+            s0, s1, s2 = s[max(i - 1, 0)], s[i], s[min(i + 1, h - 1)]
+            s3, s4 = s[max(i - 2, 0)], s[min(i + 2, h - 1)]
+            o = out[i]
+            for c in range(w):
+                x, y, z = s0[c], s1[c], s2[c]
+                if win == 5:  # the least and the greatest of the four around y are not the median: dropped
+                    lo, hi = min(s3[c], s4[c]), max(s3[c], s4[c])
+                    x, z = max(lo, min(x, z)), min(hi, max(x, z))
+                o[c] = max(min(x, y), min(max(x, y), z))  # (median of three)
+        return
+    half = win // 2
+    a = np.empty((win, w))
+    b = np.empty((win, w))
+    pos = np.empty(w, np.int64)
+    for c in range(w):
+        for j in range(win):
+            v = s[min(max(j - half, 0), h - 1), c]
+            p = j
+            while p > 0 and a[p - 1, c] > v:
+                a[p, c] = a[p - 1, c]
+                p -= 1
+            a[p, c] = v
+        out[0, c] = a[half, c]
+    for i in range(1, h):
+        old, new = s[max(i - 1 - half, 0)], s[min(i + half, h - 1)]
+        pos[:] = 0  # the old value's place: how many are below it
+        for p in range(win):
+            ap = a[p]
+            for c in range(w):
+                pos[c] += ap[c] < old[c]
+        # b[p] = max(t[p - 1], min(t[p], new)) with t: a without the old value (-inf, +inf past its ends)
+        a0, a1, bp = a[0], a[1], b[0]
+        for c in range(w):
+            x0, x1, y = a0[c], a1[c], new[c]
+            hi = x0 if pos[c] > 0 else x1
+            bp[c] = hi if hi < y else y
+        for p in range(1, win - 1):
+            a0, a1, a2, bp = a[p - 1], a[p], a[p + 1], b[p]
+            for c in range(w):
+                q, x0, x1, x2, y = pos[c], a0[c], a1[c], a2[c], new[c]
+                lo = x0 if p - 1 < q else x1
+                hi = x1 if p < q else x2
+                hi = hi if hi < y else y
+                bp[c] = hi if hi > lo else lo
+        a0, a1, bp = a[win - 2], a[win - 1], b[win - 1]
+        for c in range(w):
+            x0, x1, y = a0[c], a1[c], new[c]
+            lo = x0 if win - 2 < pos[c] else x1
+            bp[c] = y if y > lo else lo
+        a, b = b, a
+        for c in range(w):
+            out[i, c] = a[half, c]
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _line_rows(s, med, off, lo, t, best):
+    """:func:`_line_score`'s row score of one thickness, into ``best`` where larger: with ``up`` and ``dn`` the
+    median ``med`` ``off`` rows above and below (edge rows repeated), ``a = s / np.maximum(up, 1e-12) - 1``
+    and ``b`` likewise, ``r = np.where(a * b > 0, np.minimum(|a|, |b|), 0)``; its rows' percentile of rank
+    ``lo`` and weight ``t``."""
+    h, w = s.shape
+    hi = min(lo + 1, w - 1)
+    full = np.empty(max(w, 1))
+    r = np.empty(max(w, 1))
+    b = np.empty(max(w, 1))
+    for i in range(h):
+        si, up, dn = s[i], med[max(i - off, 0)], med[min(i + off, h - 1)]
+        for j in range(w):
+            u, d, x = up[j], dn[j], si[j]
+            ra = x / (1e-12 if u < 1e-12 else u) - 1.0
+            rb = x / (1e-12 if d < 1e-12 else d) - 1.0
+            m = abs(ra) if abs(ra) <= abs(rb) else abs(rb)
+            full[j] = m if ra * rb > 0 else 0.0
+        k = 0  # the positive r, to the front (the others are 0, below them)
+        for j in range(w):
+            r[k] = full[j]
+            k += full[j] > 0
+        zeros = w - k
+        if w == 0:
+            p = np.nan
+        elif zeros > hi:
+            p = 0.0
+        elif zeros > lo:  # (0 and the smallest positive)
+            m = r[0]
+            for j in range(1, k):
+                m = min(m, r[j])
+            p = _lerp(0.0, m, t)
+        else:
+            p = _percentile_of(r, k, lo - zeros, t, b)
+        if np.isnan(p) or p > best[i]:
+            best[i] = p
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _crossing(sd, i, pk, sign, base):
+    """:func:`_half_crossing` of row ``i`` of ``sign * sd`` from ``pk`` walking to higher indices (nan where it
+    does not fall to the level; a nan stops the walk)."""
+    m = sd.shape[1]
+    top = sign * sd[i, pk]
+    half = 0.5 * (top + base)
+    if not top > half:
+        return np.nan
+    j = pk + 1
+    while j < m and sign * sd[i, j] > half:
+        j += 1
+    if j == m:
+        return np.nan
+    p = sign * sd[i, j - 1]
+    return (j - 1) + (p - half) / (p - sign * sd[i, j])
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _edges(sd, c):
+    """:func:`_wall_edges` (``sd``: 2-D, ``c``: its column)."""
+    n, m = sd.shape
+    lo, hi = max(c - 3, 0), min(c + 4, m)
+    out = np.full(n, np.nan)
+    vals = np.empty(9)
+    for i in range(n):
+        if hi <= lo:
+            continue
+        pk = lo  # (np.argmax: the first largest, or the first nan)
+        top = abs(sd[i, lo])
+        if not np.isnan(top):
+            for j in range(lo + 1, hi):
+                x = abs(sd[i, j])
+                if np.isnan(x):
+                    pk = j
+                    break
+                if x > top:
+                    top, pk = x, j
+        x = sd[i, pk]
+        sign = 1.0 if x > 0 else (-1.0 if x < 0 else (0.0 if x == 0 else np.nan))  # (np.sign)
+        e = _crossing(sd, i, pk, sign, 0.0)
+        out[i] = e
+        if not np.isfinite(e):
+            continue
+        # the light just outside the wall: the median of 4-12 px out (nan ignored)
+        k0 = int(np.rint(e))
+        valid = cnt = 0
+        for o in range(4, 13):
+            if 0 <= k0 + o < m:
+                valid += 1
+                v = sign * sd[i, k0 + o]
+                if not np.isnan(v):
+                    vals[cnt] = v
+                    cnt += 1
+        if valid < 4 or cnt == 0:
+            continue
+        v = np.sort(vals[:cnt])
+        e2 = _crossing(sd, i, pk, sign, (v[(cnt - 1) // 2] + v[cnt // 2]) / 2.0)
+        if np.isfinite(e2):
+            out[i] = e2
+    return out

@@ -37,7 +37,7 @@ def _volume_tolerance(s):
 def _known(s):
     """The chamber's membrane thickness and well depth in px: the tracer's ``l0_px`` and ``depth_px``."""
     p, ch = s.truth.attrs["pixel_size"], _chamber(s.truth)
-    return dict(l0_px=ch.thickness / p, depth_px=ch.depth / p)
+    return {"l0_px": ch.thickness / p, "depth_px": ch.depth / p}
 
 
 def _extract(s, **kw):
@@ -219,7 +219,8 @@ def test_a_film_gone_from_the_flat_frame_is_no_membrane(edge_dark):
 @pytest.mark.slow
 @pytest.mark.parametrize("name", ["edge_dark", "edge_bright", "defocus"])
 def test_end_to_end_permeability_on_optics_looks(name):
-    """Reference chamber, PDMS Table-3 law -> simulate -> render in the look -> extract -> Eqn 27 fit: P_w(1) within 5 %."""
+    """Reference chamber, PDMS Table-3 law -> simulate -> render in the look -> extract -> Eqn 27 fit: P_w(1)
+    within 5 %."""
     from osmobulge.imaging.synthetic import render_simulation
     from osmobulge.modeling.fitting import fit_permeability
     from osmobulge.modeling.materials import PDMS

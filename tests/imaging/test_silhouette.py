@@ -151,3 +151,182 @@ def test_the_shared_maps_give_each_turn_what_find_walls_finds_on_it_alone():
         assert shared == alone, k
     upright = find_walls(None, l0 / p, depth_px=h / p, maps=(maps, 0))
     assert abs(upright.rim_radius - float(s.truth.isel(time=0).rim_radius) / p) < 0.5  # (the well, not a stray)
+
+
+# ---------------------------------------------------------------------- the compiled loops against numpy/scipy
+# The straightforward numpy/scipy expressions the module's kernels replace (as they were written before), and
+# the kernels checked against them: on a rendered frame in its four turns and on random data (ties, nan).
+
+
+def _line_score_reference(img, l0_px):
+    from scipy import ndimage
+
+    h, w = img.shape
+    s = img[:, : w - w % 4].reshape(h, -1, 4).mean(axis=2)
+    best = np.zeros(h)
+    for thick in (l0_px, 0.5 * l0_px, 0.25 * l0_px):
+        gap, win = max(int(round(0.55 * thick)), 2), max(int(round(0.4 * thick)), 3) | 1
+        off = gap + win // 2
+        if off >= h:
+            continue
+        med = ndimage.median_filter(s, size=(win, 1), mode="nearest")
+        up = np.r_[np.repeat(med[:1], off, axis=0), med[:-off]]
+        dn = np.r_[med[off:], np.repeat(med[-1:], off, axis=0)]
+        a = s / np.maximum(up, 1e-12) - 1.0
+        b = s / np.maximum(dn, 1e-12) - 1.0
+        r = np.where(a * b > 0, np.minimum(np.abs(a), np.abs(b)), 0.0)
+        best = np.maximum(best, np.percentile(r, 15, axis=1))
+    return best
+
+
+def _scaled_deviation_reference(img, bg):
+    sd = (img - bg) / np.maximum(bg, 1e-6 * max(float(bg.max()), 1e-30))
+    return sd / np.percentile(np.abs(sd), 99.5)
+
+
+def _half_crossings_reference(prof, pk, base=None):
+    n, m = prof.shape
+    rows = np.arange(n)
+    top = prof[rows, pk]
+    half = 0.5 * (top + (0.0 if base is None else base))
+    k = np.arange(m)[None, :]
+    below = (k > pk[:, None]) & ~(prof > half[:, None])
+    j = np.argmax(below, axis=1)
+    ok = (top > half) & below[rows, j]
+    jm = np.maximum(j - 1, 0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        e = jm + (prof[rows, jm] - half) / (prof[rows, jm] - prof[rows, j])
+    return np.where(ok, e, np.nan)
+
+
+def _wall_edges_reference(sd, c):
+    import warnings
+
+    n, m = sd.shape
+    rows = np.arange(n)
+    lo = max(c - 3, 0)
+    pk = lo + np.argmax(np.abs(sd[:, lo : c + 4]), axis=1)
+    prof = np.sign(sd[rows, pk])[:, None] * sd
+    e = _half_crossings_reference(prof, pk)
+    idx = np.round(np.nan_to_num(e, nan=-100.0)).astype(int)[:, None] + np.arange(4, 13)[None, :]
+    valid = (idx >= 0) & (idx < m) & np.isfinite(e)[:, None]
+    outside = np.where(valid, prof[rows[:, None], np.clip(idx, 0, m - 1)], np.nan)
+    enough = valid.sum(axis=1) >= 4
+    with np.errstate(invalid="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        base = np.nanmedian(outside, axis=1)
+    e2 = _half_crossings_reference(prof, pk, np.where(enough, base, 0.0))
+    return np.where(enough & np.isfinite(e2), e2, e)
+
+
+@pytest.fixture(scope="module")
+def flat_frame():
+    """A rendered flat frame (edge_dark) and its local light."""
+    from osmobulge.imaging._facetrace import _relative
+
+    img = np.asarray(render_look("edge_dark", [0.0], shape=(700, 900)).frames[0], float)
+    return img, _relative(img)
+
+
+def test_line_score_is_the_numpy_expression(flat_frame):
+    from osmobulge.imaging._silhouette import _line_score
+
+    img, _ = flat_frame
+    for k in range(4):
+        for l0 in (25.0, 12.5, 60.0):
+            np.testing.assert_allclose(_line_score(np.rot90(img, k), l0), _line_score_reference(np.rot90(img, k), l0),
+                                       rtol=0, atol=1e-12)
+    rng = np.random.default_rng(3)
+    for trial in range(20):
+        img = rng.random((rng.integers(5, 200), rng.integers(4, 150))) * 100
+        if trial % 2:  # ties
+            img = np.round(img / 10)
+        if trial % 5 == 4:  # not finite: scipy's median filter
+            img[rng.integers(img.shape[0]), rng.integers(img.shape[1])] = np.nan
+        for l0 in (3.0, 10.0, 25.0, 40.0):
+            np.testing.assert_allclose(_line_score(img, l0), _line_score_reference(img, l0), rtol=0, atol=1e-12)
+
+
+def test_scaled_deviation_is_the_numpy_expression(flat_frame):
+    from osmobulge.imaging._silhouette import _scaled_deviation
+
+    img, light = flat_frame
+    crop = (slice(300, 401), slice(150, 729))  # (a tracked frame's: float32 light, as SilhouetteTracer keeps it)
+    cases = [(img, light), (img[crop], np.asarray(light[crop].astype(np.float32), float))]
+    rng = np.random.default_rng(4)
+    for trial in range(12):
+        a = rng.random((rng.integers(2, 300), rng.integers(2, 300))) * 100
+        bg = a * rng.uniform(0.5, 1.5, a.shape)
+        if trial % 4 == 1:
+            bg[0, 0] = 0.0  # light below the floor
+        if trial % 4 == 2:
+            a[1, 1] = np.nan
+        cases.append((a, bg))
+    for a, bg in cases:
+        with np.errstate(invalid="ignore"):
+            sd, size = _scaled_deviation(a, bg)
+            ref = _scaled_deviation_reference(a, bg)
+        np.testing.assert_array_equal(sd, ref)
+        np.testing.assert_array_equal(size, np.abs(ref))
+
+
+def test_wall_edges_are_the_numpy_expression(flat_frame):
+    from osmobulge.imaging._silhouette import FlatMaps, _wall_edges
+
+    maps = FlatMaps(*flat_frame)
+    rng = np.random.default_rng(5)
+    strips = [np.rot90(maps.deviation, k)[r0 : r0 + 80] for k in range(4) for r0 in (100, 400)]
+    for _ in range(6):
+        sd = rng.normal(0, 1, (rng.integers(1, 60), rng.integers(2, 80)))
+        sd[rng.random(sd.shape) < 0.03] = np.nan
+        strips.append(sd)
+    for sd in strips:
+        m = sd.shape[1]
+        for c in sorted({0, 2, m // 3, m // 2, m - 5, m - 1} & set(range(m))):
+            for v in (sd, sd[:, ::-1]):
+                np.testing.assert_array_equal(_wall_edges(v, c), _wall_edges_reference(v, c))
+
+
+def test_percentiles_and_medians_are_numpys():
+    from scipy import ndimage
+
+    from osmobulge.imaging._silhouette import (
+        _column_medians,
+        _percentile_rows,
+        _rank,
+        _running_median,
+        _size_percentile,
+    )
+
+    rng = np.random.default_rng(6)
+    for trial in range(30):
+        h, w = rng.integers(1, 120), rng.integers(1, 120)
+        a = rng.random((h, w))
+        if trial % 3 == 1:
+            a = np.round(a * 4)  # ties
+        if trial % 3 == 2:
+            a = np.cumsum(a, axis=0)  # sorted columns
+        if trial % 5 == 4:
+            a[rng.integers(h), rng.integers(w)] = np.nan
+        for v in (a, a.T, np.rot90(a), a[:, ::-1]):  # (rows and columns of the stored array)
+            for q in (0, 15, 50, 99.5, 100):
+                np.testing.assert_array_equal(_percentile_rows(v, q), np.percentile(v, q, axis=1))
+            np.testing.assert_array_equal(_column_medians(v), np.median(v, axis=0))
+        if not np.isnan(a).any():
+            for win in (3, 5, 7, 11, 21):
+                out = np.empty_like(a)
+                _running_median(a, win, out)
+                np.testing.assert_array_equal(out, ndimage.median_filter(a, size=(win, 1), mode="nearest"))
+    for trial in range(8):  # large enough to be sampled
+        a = rng.random((200, 150 + trial)) * 100
+        bg = a * rng.uniform(0.9, 1.1, a.shape)
+        if trial == 1:
+            bg[5, 5] = -1.0
+        if trial in (2, 3):
+            (a if trial == 2 else bg)[7, 7] = np.nan
+        if trial == 4:
+            a[:100], bg[:100] = 5.0, 5.0  # ties at 0
+        floor = 1e-6 * max(float(bg.max()), 1e-30)
+        for q in (0, 15, 50, 99.5, 100):
+            got = _size_percentile(a, bg, *_rank(a.size, q))
+            np.testing.assert_array_equal(got, (floor, np.percentile(np.abs((a - bg) / np.maximum(bg, floor)), q)))
