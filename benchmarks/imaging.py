@@ -360,14 +360,34 @@ def _tracer_times(frames, chamber, px):
     return setup, per_frame, searched
 
 
+def _write_czi(path, frames, pixel_size, compression=None):
+    """The frames as a CZI file (pylibCZIrw; None when it is not installed), one T plane each."""
+    try:
+        from pylibCZIrw import czi as pyczi
+    except ImportError:
+        return None
+    kw = {} if compression is None else {"compression_options": compression}
+    with pyczi.create_czi(str(path), exist_ok=True, **kw) as w:
+        for t, f in enumerate(frames):
+            w.write(data=np.asarray(f)[..., None], plane={"T": t, "Z": 0, "C": 0})
+        w.write_metadata(scale_x=pixel_size, scale_y=pixel_size)
+    return path
+
+
+#: the CZI files the silhouette route's speed is also measured against: what the microscope (AxioObserver, ZEN)
+#: writes, uncompressed or with ZEN's lossless zstd
+CZI_KINDS = {"raw": None, "zstd": "zstd1:ExplicitLevel=1;PreProcess=HiLoByteUnpack"}
+
+
 def silhouette_speed(n_frames, looks=("edge_dark", "defocus", "halo"), n_day=97):
-    """Read vs extract per frame on optics-rendered looks written to a TIFF (the silhouette route)."""
-    print(f"\n## Speed of the silhouette route (optics looks, {n_frames} frames, 1024 x 1024 16-bit TIFF,"
-          " one core)\n")
-    print("| look | route | read ms/frame (warm / dropped) | extract ms/frame (warm / dropped) |"
-          " extract / read (warm / dropped) | frames ok | tracer setup s | tracked ms (median, max) |"
-          f" searched ms (median, n) | {n_day} frames: ms/frame, / warm read |")
-    print("|---|---|---|---|---|---|---|---|---|---|")
+    """Read vs extract per frame on optics-rendered looks written to a TIFF and to CZI files (the silhouette
+    route)."""
+    print(f"\n## Speed of the silhouette route (optics looks, {n_frames} frames, 1024 x 1024 16-bit, one core)\n")
+    print("| look | route | TIFF read ms/frame (warm / dropped) | extract ms/frame (warm / dropped) |"
+          " extract / read (warm / dropped) | CZI read ms/frame (raw / zstd) | extract from CZI / CZI read"
+          " (raw / zstd) | frames ok | tracer setup s | tracked ms (median, max) |"
+          f" searched ms (median, n) | {n_day} frames: ms/frame, / warm TIFF read |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
     vt = np.linspace(0.0, 4.0, n_frames) ** 1.5 / 2.0
     ratios = {}
     drop = hasattr(os, "posix_fadvise")
@@ -380,8 +400,8 @@ def silhouette_speed(n_frames, looks=("edge_dark", "defocus", "halo"), n_day=97)
                               concentration=3000.0)  # mol/m**3 (3 M NaCl, as benchmarks/looks.py)
             path = _write_tiff(Path(tmp) / f"{name}.tif", list(s.frames), px, 600.0)
 
-            def run():
-                return extract(path, chamber=chamber, frame_interval=600.0, progress=False)
+            def run(p=path, ch=chamber):
+                return extract(p, chamber=ch, frame_interval=600.0, progress=False)
 
             run()  # (kernels loaded)
             t_read, _ = _median_pass(lambda: _read_all(path), n_frames)
@@ -391,19 +411,34 @@ def silhouette_speed(n_frames, looks=("edge_dark", "defocus", "halo"), n_day=97)
                 t_read_c, _ = _median_pass(lambda: _read_all(path), n_frames, lambda: _drop_cache(path))
                 t_ext_c, _ = _median_pass(run, n_frames, lambda: _drop_cache(path))
                 cold = f" / {1e3 * t_read_c:.2f}", f" / {1e3 * t_ext_c:.2f}", f" / {t_ext_c / t_read_c:.1f}x"
+            czi_read, czi_ratio = [], []
+            for kind, comp in CZI_KINDS.items():
+                czi = _write_czi(Path(tmp) / f"{name}_{kind}.czi", s.frames, px, comp)
+                if czi is None:
+                    continue
+                t_cr, _ = _median_pass(lambda c=czi: _read_all(c), n_frames)
+                t_ce, _ = _median_pass(lambda c=czi: run(c), n_frames)
+                czi_read.append(f"{1e3 * t_cr:.2f}")
+                czi_ratio.append(f"{t_ce / t_cr:.1f}x")
+                ratios[f"{name}, CZI {kind}"] = t_ce / t_cr
             setup, per, searched = _tracer_times([np.asarray(f) for f in s.frames], chamber, px)
             tracked = per[~searched] if (~searched).any() else np.array([np.nan])
             sought = per[searched] if searched.any() else np.array([np.nan])
             # a day's series (every 15 min): the same searches, the other frames tracked at this series' median
             day = (setup + sought.sum() + np.median(tracked) * (n_day - searched.sum())) / n_day
-            ratios[name] = t_ext / t_read
+            ratios[f"{name}, warm TIFF"] = t_ext / t_read
+            if drop:
+                ratios[f"{name}, cold TIFF"] = t_ext_c / t_read_c
             print(f"| {name} | {ds.attrs['tracer']} | {1e3 * t_read:.2f}{cold[0]} | {1e3 * t_ext:.2f}{cold[1]} |"
-                  f" {t_ext / t_read:.1f}x{cold[2]} | {int((ds.flag == 'ok').sum())}/{n_frames} | {setup:.2f} |"
+                  f" {t_ext / t_read:.1f}x{cold[2]} | {' / '.join(czi_read) or '-'} | {' / '.join(czi_ratio) or '-'} |"
+                  f" {int((ds.flag == 'ok').sum())}/{n_frames} | {setup:.2f} |"
                   f" {1e3 * np.median(tracked):.1f}, {1e3 * tracked.max():.1f} |"
                   f" {1e3 * np.median(sought):.1f}, {int(searched.sum())} | {1e3 * day:.1f}, {day / t_read:.0f}x |",
                   flush=True)
     print(f"\ndropped: the TIFF evicted from the page cache before each pass (posix_fadvise DONTNEED; on a VM whose"
-          f" host caches the disk that is not a real disk figure). Tracer columns: SilhouetteTracer alone on the"
+          f" host caches the disk that is not a real disk figure). CZI: the same frames written by pylibCZIrw,"
+          f" uncompressed and zstd (ZEN's lossless option), read and extracted with osmobulge's CZI reader"
+          f" (aicspylibczi); the extraction includes the reading. Tracer columns: SilhouetteTracer alone on the"
           f" frames in memory (best of 3 passes); the {n_day}-frame column is derived, not measured: the setup and"
           f" the searched frames as measured plus the other frames at the tracked median (a dome grown over a day"
           f" at 15 min a frame moves less per frame than here: its tracked frames cost no more)")
