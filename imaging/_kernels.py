@@ -210,7 +210,7 @@ def change_transects(frame, k, flat, light, points, directions, offsets, shift, 
     ndarray of float64, shape (N, K)
     """
     frame, flat = native_frame(frame), native_frame(flat)
-    light = np.ascontiguousarray(light, np.float64) if light.dtype != np.float32 else np.ascontiguousarray(light)
+    light = np.ascontiguousarray(light, np.float32 if light.dtype == np.float32 else np.float64)
     p = np.ascontiguousarray(points, np.float64).reshape(-1, 2)
     d = np.ascontiguousarray(directions, np.float64).reshape(-1, 2)
     o = np.ascontiguousarray(offsets, np.float64).ravel()
