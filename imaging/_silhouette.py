@@ -298,20 +298,6 @@ def _strongest(col_score, width, min_width):
     return peaks
 
 
-def _wall_edges(sd, c):
-    """Per row of ``sd`` (signed deviation, walking outwards to higher indices), the wall's outer half-level edge
-    from its zone's extreme within 3 columns of ``c``: :func:`_fit_walls`' rule, on all the rows at once.
-
-    The zone's extreme is the first largest ``|sd|`` in the row's columns
-    ``c - 3 .. c + 3``; the edge, the first crossing (:func:`_half_crossing`) of
-    the level half-way from it to 0 and then, with the median of the light
-    just outside the wall (4-12 px past that crossing, at least 4 of them
-    inside the row) as the base, half-way from it to that base (the first
-    crossing when there is none); nan where there is no crossing.
-    """
-    return _edges(sd, c)
-
-
 def _fit_walls(sd, peaks, r0, r1, top_row, base_row):
     """Each wall's outer half-level edge row by row, fitted by a line and read at ``base_row``.
 
@@ -728,8 +714,17 @@ def _crossing(sd, i, pk, sign, base):
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _edges(sd, c):
-    """:func:`_wall_edges` (``sd``: 2-D, ``c``: its column)."""
+def _wall_edges(sd, c):
+    """Per row of ``sd`` (signed deviation, walking outwards to higher indices), the wall's outer half-level edge
+    from its zone's extreme within 3 columns of ``c``: :func:`_fit_walls`' rule, on all the rows at once.
+
+    The zone's extreme is the first largest ``|sd|`` in the row's columns
+    ``c - 3 .. c + 3``; the edge, the first crossing (:func:`_half_crossing`) of
+    the level half-way from it to 0 and then, with the median of the light
+    just outside the wall (4-12 px past that crossing, at least 4 of them
+    inside the row) as the base, half-way from it to that base (the first
+    crossing when there is none); nan where there is no crossing.
+    """
     n, m = sd.shape
     lo, hi = max(c - 3, 0), min(c + 4, m)
     out = np.full(n, np.nan)
