@@ -19,11 +19,13 @@ lines.  :class:`SilhouetteTracer` therefore reads, in each bulge-up frame:
    transects only (:func:`osmobulge.imaging._kernels.sample_transects`) and
    smoothed along them;
 3. **the outer face**: in a tracked frame, along the normals of the last ok
-   frame's outer face moved on by its last step (a track in doubt is searched
-   instead); else along rays from the rim plane's centre, walking in from
-   the frame's edge, the first strong feature (of the dome's own sign; a halo or
-   fringe of the other sign is not it) and on its outer flank the steepest rise
-   (sub-pixel): the silhouette edge.  Rays whose edge jumps from its
+   frame's outer face moved on by its last step (in one pass within 8 px
+   where that prediction holds; else a wider first pass, then along the normals
+   of the curve it found; a track in doubt is searched instead); else along
+   rays from the rim plane's centre.  Walking in from outside, the first
+   strong feature (of the dome's own sign; a halo or fringe of the other sign
+   is not it) and on its outer flank the steepest rise (sub-pixel) is the
+   silhouette edge.  Rays whose edge jumps from its
    neighbours' (another fringe, dust) are dropped and counted;
 4. **the mid-surface**: the outer face offset inwards by half the film's
    thickness :math:`l = l_0 \pi R^2 / A` (incompressible film of uniform
@@ -77,6 +79,9 @@ _NOISE_COLUMNS = 16
 _TRACK_REACH, _TRACK_STATIONS = 30.0, 4.5
 #: station spacing (px) along the outer face for the second pass, and its normals' reach and step (px)
 _STATION_STEP, _NORMAL_REACH, _NORMAL_STEP = 1.5, 8.0, 0.25
+#: arc (px) of the running median a one-pass track's edges are compared with (its stations': as the two-pass
+#: track's first pass, 9 stations 4.5 px apart)
+_ONE_PASS_MEDIAN_PX = 40.0
 #: height (px) above the top face below which the outer face's edge is not used (the feet), and the
 #: dome height below which a frame is flagged poor_fit (figure low_dome): its edge is mostly feet
 _FOOT_PX, _LOW_DOME_PX = 4.0, 8.0
@@ -329,11 +334,11 @@ def _film_thickness(d, top_row, left, right, guess):
     return float(r0 + k + _vertex(prof[k - 1], prof[k], prof[k + 1]) - top_row)
 
 
-def _first_edges(v, t, sign, noise):
+def _first_edges(v, t, sign, noise, size=9):
     """The outer edge along each profile of ``v`` (rows sampled at ``t`` px, from outside in; the dome's change
     has sign ``sign``) as a position in ``t`` (nan where none), whether found, whether it jumped (more than
-    ``_JUMP_PX`` off its neighbours' running median), the threshold, and the figures ``dome_contrast`` (median
-    strongest change / noise) and ``edge_sign`` (profiles whose strongest change has the dome's sign)."""
+    ``_JUMP_PX`` off the running median of ``size`` profiles'), the threshold, and the figures ``dome_contrast``
+    (median strongest change / noise) and ``edge_sign`` (profiles whose strongest change has the dome's sign)."""
     extreme = v[np.arange(v.shape[0]), np.argmax(np.abs(v), axis=1)]
     strength = np.abs(extreme)
     prof = np.clip(sign * v, 0.0, None)
@@ -341,24 +346,13 @@ def _first_edges(v, t, sign, noise):
     edge = outer_edges(prof, float(thr), int(12.0 / abs(float(t[1] - t[0]))))
     te = np.interp(edge, np.arange(t.size), t, left=np.nan, right=np.nan)
     found = np.isfinite(te)
-    med = ndimage.median_filter(np.where(found, te, np.nanmedian(te) if found.any() else 0.0), size=9,
+    med = ndimage.median_filter(np.where(found, te, np.nanmedian(te) if found.any() else 0.0), size=size,
                                 mode="nearest")
     jump = found & (np.abs(te - med) > _JUMP_PX)
     strong = strength > 10.0 * noise
     figs = {"dome_contrast": float(np.median(strength) / max(noise, 1e-12)),
             "edge_sign": float(np.mean(np.sign(extreme[strong]) == sign)) if strong.any() else 0.0}
     return te, found, jump, thr, figs
-
-
-def _polyline_distance(points, line):
-    """Distance (px) of each point from the polyline through ``line`` (its nearest vertex's two segments)."""
-    i = cKDTree(line).query(points)[1]
-    best = np.hypot(*(points - line[i]).T)
-    for a, b in ((np.maximum(i - 1, 0), i), (i, np.minimum(i + 1, len(line) - 1))):
-        d = line[b] - line[a]
-        t = np.clip(np.sum((points - line[a]) * d, axis=1) / np.maximum(np.sum(d * d, axis=1), 1e-300), 0.0, 1.0)
-        best = np.minimum(best, np.hypot(*(points - line[a] - t[:, None] * d).T))
-    return best
 
 
 def _thickness(u, z, rim_l, rim_r, l0):
@@ -478,9 +472,11 @@ class SilhouetteTracer:
         self._reg_rows = (int(np.ceil(w.base_row + 5)), min(int(w.base_row + self.depth) + 40, img.shape[0]))
         self._reg_ref = tuple(_Shift1D(p) for p in _profiles(img[slice(*self._reg_rows)]))
         self.prev = None
-        self._track = None  # the last ok frame's outer face (u, z), px
+        self._track = None  # the last ok frames' outer faces (u, z), px (one or two)
+        self._curves = None  # and their final curves (ProfileSpline)
         self._splines = []  # the splines of the track's curves (:meth:`_spline`)
         self.searches = 0  # frames whose outer face was searched for by rays (not tracked)
+        self.one_pass = 0  # frames tracked in one pass (:meth:`_one_pass`)
         self.film_mismatch = getattr(self, "film_mismatch", 0.0)  # px (0: l0 measured from these faces)
 
     # ---------------------------------------------------------------------- first frame
@@ -626,7 +622,7 @@ class SilhouetteTracer:
             u, z, figs = self._outer_face(sample, w, noise)
         out.figures.update(figs)
         if u is None:  # no dome: flat (the film unchanged) or gone
-            self._track = None
+            self._track = self._curves = None
             return self._flat_or_gone(sample, w, noise, g, out)
         return self._finish(u, z, w, g, out)
 
@@ -680,13 +676,24 @@ class SilhouetteTracer:
         return u, z, figs
 
     def _tracked(self, sample, w, noise):
-        """Outer-face points (u, z) found along the normals of the last frame's outer face, moved on by its last
-        step (within ``_TRACK_REACH`` px), or None when they are not all there (the full search then runs);
-        figures."""
-        (u0, z0), before = self._track[-1], (self._track[0] if len(self._track) == 2 else None)
+        """Outer-face points (u, z) found along the normals of the last ok frame's outer face moved on by its last
+        step, or None when they are not all there (the full search then runs); figures.
+
+        One pass first (:meth:`_one_pass`); when the prediction is off by more
+        than its reach, two: within ``_TRACK_REACH`` px along the normals of
+        the last frame's points' spline every ``_TRACK_STATIONS`` px, then
+        :meth:`_along_normals` of the curve found.
+        """
         sign = -float(self.polarity)
-        xy, nu, nz, offs, v = self._normals(sample, w, u0, z0, _TRACK_REACH, sigma=_FIRST_SIGMA,
-                                            station_step=_TRACK_STATIONS, step=_RAY_STEP, before=before)
+        u, z, figs = self._one_pass(sample, w, noise, sign)
+        if u is not None:
+            self.one_pass += 1
+            return u, z, figs
+        (u0, z0), before = self._track[-1], (self._track[0] if len(self._track) == 2 else None)
+        spl = self._spline(w, u0, z0, _FIRST_SIGMA)
+        before = None if before is None else self._spline(w, *before, _FIRST_SIGMA)
+        xy, nu, nz, offs, v = self._normals(sample, w, spl, _TRACK_REACH, station_step=_TRACK_STATIONS,
+                                            step=_RAY_STEP, before=before)
         o, found, jump, thr, figs = _first_edges(v, offs, sign, noise)
         good = found & ~jump
         near_end = found & (np.abs(o) > _TRACK_REACH - 2.0)  # (the edge may lie past the reach)
@@ -700,26 +707,49 @@ class SilhouetteTracer:
         figs.update(more)
         return u, z, figs
 
+    def _one_pass(self, sample, w, noise, sign):
+        """Outer-face points (u, z) along the normals of the last ok frame's final curve moved on by its last
+        step (stations every ``_STATION_STEP`` px, within ``_NORMAL_REACH`` px, every ``_NORMAL_STEP`` px), or
+        None when the prediction is in doubt (an edge near the reach's ends, contrast, jumps or losses); figures.
+
+        An edge further than ``_JUMP_PX`` from the running median of the
+        stations' within ``_ONE_PASS_MEDIAN_PX`` of arc jumped (the offsets
+        from a good prediction are small and smooth along the curve).
+        """
+        last, before = self._curves[-1], (self._curves[0] if len(self._curves) == 2 else None)
+        xy, nu, nz, offs, v = self._normals(sample, w, last, _NORMAL_REACH, before=before)
+        size = 2 * int(0.5 * _ONE_PASS_MEDIAN_PX / _STATION_STEP) + 1
+        o, found, jump, thr, figs = _first_edges(v, offs, sign, noise, size=size)
+        near_end = found & (np.abs(o) > _NORMAL_REACH - 2.0)  # (the edge may lie past the reach)
+        # (a station within 2 _FOOT_PX of the top face may: the curve's feet are bridged by the spline, the
+        # prediction is poorest there; it is dropped)
+        if figs["dome_contrast"] < 10.0 or np.any(near_end & (xy[:, 1] > 2.0 * _FOOT_PX)) or found.sum() < 20:
+            return None, None, figs
+        u, z, more = self._edges(w, xy, nu, nz, o, found, jump | near_end)
+        if more["edge_jumps"] > 0.5 * _JUMP_FLAG or more["edge_lost"] > 0.5 * _LOST_FLAG:
+            return None, None, figs
+        figs.update(more)
+        return u, z, figs
+
     def _feet(self, w, u, z):
         """The outer face's points with its feet on the top face at the rim, left rim -> right rim."""
         return np.r_[[[w.left - w.axis_col, 0.0]], np.c_[u, z], [[w.right - w.axis_col, 0.0]]]
 
-    def _normals(self, sample, w, u, z, reach, sigma, station_step=_STATION_STEP, step=_NORMAL_STEP, before=None):
-        """Stations every ``station_step`` px along the smoothed curve (spline of scatter ``sigma``) through
-        ``(u, z)`` with its feet, and the change along their normals within ``reach`` px (outside -> inside,
-        every ``step`` px): ``(xy, nu, nz, offsets, profiles)``.
+    def _normals(self, sample, w, spl, reach, station_step=_STATION_STEP, step=_NORMAL_STEP, before=None):
+        """Stations every ``station_step`` px along the curve ``spl`` (a :class:`ProfileSpline` with its feet)
+        and the change along their normals within ``reach`` px (outside -> inside, every ``step`` px):
+        ``(xy, nu, nz, offsets, profiles)``.
 
-        ``before``: the curve one frame earlier (points ``(u, z)``); each station
-        is then moved on along its normal by its distance from it (the dome
-        keeps its pace: a prediction of the next frame's curve).
+        ``before``: the curve one frame earlier (a :class:`ProfileSpline`);
+        each station is then moved on along its normal by its distance from it
+        (the dome keeps its pace: a prediction of the next frame's curve).
         """
-        spl = self._spline(w, u, z, sigma)
         s, xy = spl.sample(step=station_step)
         s, xy = s[1:-1], xy[1:-1]  # (not the feet themselves)
         tang = spl.tangent(s)
         nu, nz = -tang[:, 1], tang[:, 0]  # outward
         if before is not None:
-            _, dense = self._spline(w, *before, sigma).sample(step=0.5)
+            _, dense = before.sample(step=0.5)
             q = dense[cKDTree(dense).query(xy)[1]]
             lead = (xy[:, 0] - q[:, 0]) * nu + (xy[:, 1] - q[:, 1]) * nz
             xy = xy + lead[:, None] * np.c_[nu, nz]
@@ -742,16 +772,20 @@ class SilhouetteTracer:
         """Outer-face edges along the normals of the curve through ``(u, z)``, every 1.5 px; figures.
 
         A station whose edge lies more than ``_JUMP_PX`` off the first curve
-        jumped (another fringe, dust) and is dropped; ``edge_lost``: stations
-        without an edge; ``gap_length``: their longest run, / l0.
+        jumped (another fringe, dust) and is dropped.
         """
-        xy, nu, nz, offs, v = self._normals(sample, w, u, z, _NORMAL_REACH, sigma=_FIRST_SIGMA)
+        xy, nu, nz, offs, v = self._normals(sample, w, self._spline(w, u, z, _FIRST_SIGMA), _NORMAL_REACH)
         prof = np.clip(sign * v, 0.0, None)
         window = int(12.0 / _NORMAL_STEP)
         edge = outer_edges(prof, float(thr), window)
         o = np.interp(edge, np.arange(offs.size), offs, left=np.nan, right=np.nan)
         found = np.isfinite(o)
-        jump = found & (np.abs(o) > _JUMP_PX)
+        return self._edges(w, xy, nu, nz, o, found, found & (np.abs(o) > _JUMP_PX))
+
+    def _edges(self, w, xy, nu, nz, o, found, jump):
+        """The outer face's points ``(u, z)`` at offsets ``o`` along the stations' normals (those found and not
+        jumped, above the feet) and the figures ``edge_jumps``, ``edge_lost``, ``gap_length`` (the longest run
+        of stations without an edge, / l0), ``field_margin`` and ``low_dome``."""
         good = found & ~jump
         longest = longest_run(~found, np.ones(found.size))  # (stations)
         # the dome reaching the field's edge: part of it is not in the frame
@@ -799,7 +833,7 @@ class SilhouetteTracer:
         rim_l, rim_r = w.axis_col - w.left, w.right - w.axis_col
         spl = smooth_profile(self._feet(w, u, z), sigma=_FINAL_SIGMA)  # the outer face meets the top face at the rim
         s, xy = spl.sample(step=1.0)
-        resid = float(np.sqrt(np.mean(_polyline_distance(np.c_[u, z], xy) ** 2)))  # (the curve every px)
+        resid = float(np.sqrt(np.nanmean(spl.normal_residuals[1:-1] ** 2)))  # (the points', not the feet's)
         tang = spl.tangent(s)
         normal = np.c_[-tang[:, 1], tang[:, 0]]  # outward for a curve left rim -> over the top -> right rim
         l0, rim = self.l0, 0.5 * (rim_l + rim_r)
@@ -836,8 +870,9 @@ class SilhouetteTracer:
             # (the next frame's outer face is searched along the normals of this one's, moved on by as much as it
             # moved since the last)
             self._track = ((self._track[-1],) if self._track else ()) + ((u, z),)
+            self._curves = ((self._curves[-1],) if self._curves else ()) + (spl,)
         else:
-            self._track = None
+            self._track = self._curves = None
         return out
 
     def _flag(self, fig):
