@@ -52,7 +52,7 @@ import numpy as np
 from scipy import ndimage
 
 from osmobulge.imaging._chamber import ROTATIONS, ChamberGeometry, ChamberNotFound, FrameView, Line, Well
-from osmobulge.imaging._kernels import change_transects, longest_run, native_frame, outer_edges
+from osmobulge.imaging._kernels import change_transects, longest_run, median, native_frame, outer_edges
 from osmobulge.imaging._silhouette import FlatMaps, find_walls
 from osmobulge.imaging.geometry import revolution_measures, smooth_profile
 from osmobulge.imaging.trace import FrameTrace, TraceSettings, first_flag, manual_curve
@@ -641,7 +641,7 @@ class SilhouetteTracer:
         rows = np.linspace(2.0, max(w.top_row - 5.0, 10.0), _NOISE_ROWS)
         v = sample(np.c_[np.zeros_like(rows), rows], np.tile([1.0, 0.0], (rows.size, 1)),
                    np.arange(0.0, self.view_shape[1] - 1.0, _RAY_STEP))
-        return max(1.4826 * float(np.median(np.abs(v - np.median(v)))), 1e-4)
+        return max(1.4826 * median(np.abs(v - median(v))), 1e-4)
 
     def _rays(self, sample, w):
         phis = np.linspace(_RAY_MIN, np.pi - _RAY_MIN, _N_RAYS)

@@ -1020,6 +1020,19 @@ def nanmedian(a):
     return float(_nanmedian_flat(np.ascontiguousarray(a, np.float64).ravel()))
 
 
+def median(a):
+    """``np.median`` of all the samples (finite), the same to the bit, by one selection.
+
+    For an even count numpy selects the two middle values at once (``np.partition``
+    with two ``kth``), 4-5x slower on 25 000 samples than selecting the upper one,
+    below which the lower one is the largest.
+    """
+    x = np.asarray(a, np.float64).ravel()
+    k = x.size // 2
+    p = np.partition(x, k)
+    return float(p[k]) if x.size % 2 else float((p[:k].max() + p[k]) / 2)
+
+
 @njit(cache=True, nogil=True, error_model="numpy")  # a zero axis gives nan (as numpy), not ZeroDivisionError
 def ellipse_distance_folded(x, y, a, b, max_iter):
     """Distances of folded points (``x, y >= 0``, ``a >= b``) from the ellipse: Eberly's Newton in ``u = s + b^2``.
