@@ -52,7 +52,15 @@ import numpy as np
 from scipy import ndimage
 
 from osmobulge.imaging._chamber import ROTATIONS, ChamberGeometry, ChamberNotFound, FrameView, Line, Well
-from osmobulge.imaging._kernels import change_transects, longest_run, median, native_frame, outer_edges
+from osmobulge.imaging._kernels import (
+    change_transects,
+    longest_run,
+    median,
+    native_frame,
+    outer_edges,
+    percentile,
+    upsample_linear,
+)
 from osmobulge.imaging._silhouette import FlatMaps, find_walls
 from osmobulge.imaging.geometry import revolution_measures, smooth_profile
 from osmobulge.imaging.trace import FrameTrace, TraceSettings, first_flag, manual_curve
@@ -120,8 +128,11 @@ def dark_background(frame):
     background) would look the same as dark field.
     """
     img = np.asarray(frame, float)
-    hi = float(np.nanpercentile(img, 99.9))
-    ratio = float(np.nanmedian(img)) / hi if hi > 0 else 1.0
+    if np.isnan(img).any():
+        hi, mid = float(np.nanpercentile(img, 99.9)), float(np.nanmedian(img))
+    else:  # (numpy's, by one selection each)
+        hi, mid = percentile(img, 99.9), median(img)
+    ratio = mid / hi if hi > 0 else 1.0
     if ratio >= _DARK_BACKGROUND:
         return ratio, ""
     return ratio, (f"the background is dark ({100 * ratio:.1f} % of the brightest pixels, below "
@@ -152,19 +163,8 @@ def _relative(img, sigma=25.0, block=4):
         coarse = pad.reshape(rows // block, block, cols // block, block).mean(axis=(1, 3))
         s = np.sqrt(max(sigma**2 - (block**2 - 1) / 12.0, 0.0)) / block
         coarse = ndimage.gaussian_filter(coarse, s, mode="nearest")
-        bg = _upsample(_upsample(coarse, w, block, axis=1), h, block, axis=0)  # (columns first: fewer rows)
+        bg = upsample_linear(coarse, (h, w), block)
     return np.maximum(bg, 1e-6 * max(float(bg.max()), 1e-30))
-
-
-def _upsample(coarse, n, block, axis):
-    """Linear interpolation of ``coarse`` (block centres every ``block`` px along ``axis``) at ``n`` px."""
-    m = coarse.shape[axis]
-    x = np.clip((np.arange(n) - 0.5 * (block - 1)) / block, 0.0, m - 1.0)
-    i0 = np.minimum(x.astype(int), m - 2)
-    t = x - i0
-    if axis == 0:
-        return coarse[i0] * (1.0 - t)[:, None] + coarse[i0 + 1] * t[:, None]
-    return coarse[:, i0] * (1.0 - t) + coarse[:, i0 + 1] * t
 
 
 def _profiles(img):

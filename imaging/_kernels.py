@@ -225,6 +225,43 @@ def change_transects(frame, k, flat, light, points, directions, offsets, shift, 
 
 
 @njit(cache=True, nogil=True)
+def _upsample_axis1(coarse, n, block, out):
+    m = coarse.shape[1]
+    for j in range(n):
+        x = min(max((j - 0.5 * (block - 1)) / block, 0.0), m - 1.0)
+        i0 = min(int(x), m - 2)
+        t = x - i0
+        for r in range(coarse.shape[0]):
+            out[r, j] = coarse[r, i0] * (1.0 - t) + coarse[r, i0 + 1] * t
+
+
+@njit(cache=True, nogil=True)
+def _upsample_axis0(coarse, n, block, out):
+    m = coarse.shape[0]
+    for i in range(n):
+        x = min(max((i - 0.5 * (block - 1)) / block, 0.0), m - 1.0)
+        i0 = min(int(x), m - 2)
+        t = x - i0
+        for c in range(coarse.shape[1]):
+            out[i, c] = coarse[i0, c] * (1.0 - t) + coarse[i0 + 1, c] * t
+
+
+def upsample_linear(coarse, shape, block):
+    """Linear interpolation of ``coarse`` (the centres of ``block`` x ``block`` px blocks) at every px of
+    ``shape``, clamped at the ends: columns first, then rows (as two 1-D passes of ``coarse[i0] * (1 - t) +
+    coarse[i0 + 1] * t`` with ``x = clip((px - (block - 1) / 2) / block, 0, m - 1)``, ``i0 = min(int(x), m - 2)``,
+    ``t = x - i0``).  Each axis of ``coarse`` needs at least 2 blocks."""
+    coarse = np.ascontiguousarray(coarse, np.float64)
+    if min(coarse.shape) < 2:
+        raise ValueError(f"coarse needs at least 2 blocks along each axis, got shape {coarse.shape}")
+    cols = np.empty((coarse.shape[0], int(shape[1])))
+    _upsample_axis1(coarse, int(shape[1]), int(block), cols)
+    out = np.empty((int(shape[0]), int(shape[1])))
+    _upsample_axis0(cols, int(shape[0]), int(block), out)
+    return out
+
+
+@njit(cache=True, nogil=True)
 def _grad(p, i, k, m):
     """``np.gradient(p[i])[k]`` (first-order one-sided at the ends)."""
     if k == 0:
@@ -1018,6 +1055,22 @@ def _nanmedian_flat(a):
 def nanmedian(a):
     """``np.nanmedian`` of all the samples (nan when none is finite), without its per-call overhead."""
     return float(_nanmedian_flat(np.ascontiguousarray(a, np.float64).ravel()))
+
+
+def percentile(a, q):
+    """``np.percentile(a, q)`` (method "linear") of all the samples (finite), the same to the bit, by one selection
+    (numpy selects the two order statistics it interpolates between at once; see :func:`median`)."""
+    x = np.asarray(a, np.float64).ravel()
+    n = x.size
+    pos = (n - 1) * (float(q) / 100.0)  # (numpy's virtual index and its weight)
+    lo = int(np.floor(pos))
+    t = pos - lo
+    if lo + 1 >= n:
+        return float(x.max())
+    p = np.partition(x, lo + 1)
+    a0, b0 = float(p[: lo + 1].max()), float(p[lo + 1])
+    diff = b0 - a0
+    return b0 - diff * (1.0 - t) if t >= 0.5 else a0 + diff * t  # (numpy's _lerp)
 
 
 def median(a):

@@ -515,6 +515,41 @@ def test_median_is_numpys_to_the_bit():
     assert median(a) == np.median(a) and median(np.array([3, 1, 2, 8], np.uint16)) == 2.5
 
 
+def test_percentile_is_numpys_to_the_bit():
+    """numpy's linear percentile by one selection: the same value at both ends, between and at order statistics."""
+    from osmobulge.imaging._kernels import percentile
+
+    rng = np.random.default_rng(3)
+    for n in (1, 2, 3, 10, 1001, 200_000):
+        a = rng.normal(size=n)
+        for q in (0.0, 12.3, 50.0, 99.9, 100.0):
+            assert percentile(a, q) == np.percentile(a, q), (n, q)
+    assert percentile(np.array([[3, 1], [2, 8]], np.uint16), 50.0) == 2.5
+
+
+def test_upsample_linear_is_the_numpy_interpolation():
+    """The compiled block-centre interpolation against its numpy expression (columns, then rows), to the bit,
+    for shapes that are and are not multiples of the block."""
+    from osmobulge.imaging._kernels import upsample_linear
+
+    def along(coarse, n, block, axis):
+        m = coarse.shape[axis]
+        x = np.clip((np.arange(n) - 0.5 * (block - 1)) / block, 0.0, m - 1.0)
+        i0 = np.minimum(x.astype(int), m - 2)
+        t = x - i0
+        if axis == 0:
+            return coarse[i0] * (1.0 - t)[:, None] + coarse[i0 + 1] * t[:, None]
+        return coarse[:, i0] * (1.0 - t) + coarse[:, i0 + 1] * t
+
+    rng = np.random.default_rng(4)
+    for shape, block in (((1024, 1024), 4), ((501, 333), 4), ((37, 90), 3), ((8, 8), 4)):
+        coarse = rng.normal(size=(-(-shape[0] // block), -(-shape[1] // block)))
+        want = along(along(coarse, shape[1], block, 1), shape[0], block, 0)
+        assert np.array_equal(upsample_linear(coarse, shape, block), want), shape
+    with pytest.raises(ValueError, match="at least 2 blocks"):
+        upsample_linear(np.ones((1, 5)), (4, 20), 4)
+
+
 def test_column_nanmedian_equals_numpy():
     from osmobulge.imaging._kernels import column_nanmedian
 
