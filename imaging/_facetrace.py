@@ -71,8 +71,12 @@ __all__ = ["SilhouetteTracer"]
 #: apart at a 350 px dome: they only seed the second pass along the normals every 1.5 px; on the 21 looks at
 #: 9 frames, volumes within 5e-4 of 721 rays', the same flags; a searched frame 93 -> 60 ms)
 _RAY_MIN, _N_RAYS = np.radians(1.0), 361
-#: samples along a ray (px) and the Gaussian smoothing of the change image (px)
+#: samples along a transect (px) and the Gaussian smoothing of the change image (px)
 _RAY_STEP, _SMOOTH = 0.5, 0.7
+#: samples along a ray of the full search (px): its edges only seed the pass along the normals (every
+#: _NORMAL_STEP); on the 21 looks at 9 frames, every frame searched, volumes within 1e-3 of 0.5 px steps', the
+#: same flags; a searched frame 56 -> 37 ms
+_SEARCH_STEP = 1.0
 #: scatter (px) of the smoothing splines: of the final outer face, and of the curves whose normals are sampled
 _FINAL_SIGMA, _FIRST_SIGMA = 0.5, 1.0
 #: an edge further than this (px) from the running median of its neighbours' is a jump
@@ -647,7 +651,7 @@ class SilhouetteTracer:
         phis = np.linspace(_RAY_MIN, np.pi - _RAY_MIN, _N_RAYS)
         rows, cols = self.view_shape
         tmax = float(np.hypot(max(w.axis_col, cols - w.axis_col), w.top_row))
-        t = np.arange(tmax, 0.0, -_RAY_STEP)
+        t = np.arange(tmax, 0.0, -_SEARCH_STEP)
         centre = np.tile([w.axis_col, w.top_row], (phis.size, 1))
         v = sample(centre, np.c_[np.cos(phis), -np.sin(phis)], t)
         return phis, t, v
