@@ -359,6 +359,11 @@ def _first_edges(v, t, sign, noise, size=9):
     return te, found, jump, thr, figs
 
 
+def _ends(a, x, b):
+    """``x`` between ``a`` and ``b`` (``np.r_[a, x, b]`` without its parsing: the per-frame paths build many)."""
+    return np.concatenate(([a], x, [b]))
+
+
 def _thickness(u, z, rim_l, rim_r, l0):
     r"""The film's thickness along a mid-surface curve (left rim -> right rim), px.
 
@@ -371,7 +376,7 @@ def _thickness(u, z, rim_l, rim_r, l0):
     l_0 \pi R^2` (the film over the well is conserved), so the volume between
     the outer face and the mid-surface is right to first order in :math:`l`.
     """
-    arc = np.r_[0.0, np.cumsum(np.hypot(np.diff(u), np.diff(z)))]
+    arc = np.concatenate(([0.0], np.cumsum(np.hypot(np.diff(u), np.diff(z)))))
     pole = int(np.argmin(np.abs(u)))
     out = np.empty_like(u)
     for sl, rim, dist in ((slice(0, pole + 1), rim_l, arc[: pole + 1]),
@@ -643,7 +648,7 @@ class SilhouetteTracer:
         transects across the view; the dome, a minority of the samples, included); never below 1e-4 (the first
         frame is its own reference and changes by nothing)."""
         rows = np.linspace(2.0, max(w.top_row - 5.0, 10.0), _NOISE_ROWS)
-        v = sample(np.c_[np.zeros_like(rows), rows], np.tile([1.0, 0.0], (rows.size, 1)),
+        v = sample(np.column_stack((np.zeros_like(rows), rows)), np.tile([1.0, 0.0], (rows.size, 1)),
                    np.arange(0.0, self.view_shape[1] - 1.0, _RAY_STEP))
         return max(1.4826 * median(np.abs(v - median(v))), 1e-4)
 
@@ -736,7 +741,7 @@ class SilhouetteTracer:
 
     def _feet(self, w, u, z):
         """The outer face's points with its feet on the top face at the rim, left rim -> right rim."""
-        return np.r_[[[w.left - w.axis_col, 0.0]], np.c_[u, z], [[w.right - w.axis_col, 0.0]]]
+        return np.column_stack((_ends(w.left - w.axis_col, u, w.right - w.axis_col), _ends(0.0, z, 0.0)))
 
     def _normals(self, sample, w, spl, reach, station_step=_STATION_STEP, step=_NORMAL_STEP, before=None):
         """Stations every ``station_step`` px along the curve ``spl`` (a :class:`ProfileSpline` with its feet)
@@ -758,9 +763,9 @@ class SilhouetteTracer:
         if before is not None:
             q = before(s * (before.length / spl.length))
             lead = (xy[:, 0] - q[:, 0]) * nu + (xy[:, 1] - q[:, 1]) * nz
-            xy = xy + lead[:, None] * np.c_[nu, nz]
+            xy = xy + lead[:, None] * np.column_stack((nu, nz))
         offs = np.arange(reach, -reach - 1e-9, -step)  # outside -> inside
-        v = sample(np.c_[w.axis_col + xy[:, 0], w.top_row - xy[:, 1]], np.c_[nu, -nz], offs)
+        v = sample(np.column_stack((w.axis_col + xy[:, 0], w.top_row - xy[:, 1])), np.column_stack((nu, -nz)), offs)
         return xy, nu, nz, offs, v
 
     def _spline(self, w, u, z, sigma):
@@ -841,7 +846,7 @@ class SilhouetteTracer:
         s, xy = spl.sample(step=1.0)
         resid = float(np.sqrt(np.nanmean(spl.normal_residuals[1:-1] ** 2)))  # (the points', not the feet's)
         tang = spl.tangent(s)
-        normal = np.c_[-tang[:, 1], tang[:, 0]]  # outward for a curve left rim -> over the top -> right rim
+        normal = np.column_stack((-tang[:, 1], tang[:, 0]))  # outward for a curve left rim -> over the top -> right rim
         l0, rim = self.l0, 0.5 * (rim_l + rim_r)
         # the film's thickness along the curve: uniform first, then from the kinematics of the last mid-surface
         lthick = np.full(len(xy), l0)
@@ -849,16 +854,16 @@ class SilhouetteTracer:
             mid = xy - 0.5 * lthick[:, None] * normal
             mu, mz = mid[:, 0], mid[:, 1] + 0.5 * l0
             try:
-                m = revolution_measures(np.r_[-rim_l, mu[mz > 0], rim_r], np.r_[0.0, mz[mz > 0], 0.0])
+                m = revolution_measures(_ends(-rim_l, mu[mz > 0], rim_r), _ends(0.0, mz[mz > 0], 0.0))
             except ValueError as err:
                 out.message = str(err)
                 out.flag, out.flag_figure, out.flag_value = "poor_fit", "residual_rms", float(resid)
                 return out
             # (on the curve from rim to rim: the outer face's feet offset inwards lie inside the rim)
-            lthick = _thickness(np.r_[-rim_l, mu, rim_r], np.r_[0.0, np.maximum(mz, 0.0), 0.0], rim_l, rim_r,
+            lthick = _thickness(_ends(-rim_l, mu, rim_r), _ends(0.0, np.maximum(mz, 0.0), 0.0), rim_l, rim_r,
                                 l0)[1:-1]
         keep = mz > 0.0
-        mu, mz = np.r_[-rim_l, mu[keep], rim_r], np.r_[0.0, mz[keep], 0.0]
+        mu, mz = _ends(-rim_l, mu[keep], rim_r), _ends(0.0, mz[keep], 0.0)
         out.u, out.z = mu, mz
         out.points_u, out.points_z = u, z + 0.5 * l0
         out.residual_rms = float(resid)

@@ -318,16 +318,25 @@ def _fit_walls(sd, peaks, r0, r1, top_row, base_row):
         ok = np.isfinite(u)
         if ok.sum() < 5:
             raise ChamberNotFound("a wall's silhouette edge could not be followed down the base")
-        coef = np.polyfit(rows[ok], u[ok], 1)
-        r = u[ok] - np.polyval(coef, rows[ok])
+        x, y = rows[ok].astype(float), u[ok]
+        r = y - _line_at(x, y, x)
         keep = np.abs(r) <= max(3.0 * np.std(r), 0.3)
-        coef = np.polyfit(rows[ok][keep], u[ok][keep], 1)
-        fits.append(float(np.polyval(coef, base_row)))
-        res.append(float(np.sqrt(np.mean((u[ok][keep] - np.polyval(coef, rows[ok][keep])) ** 2))))
+        x, y = x[keep], y[keep]
+        fits.append(float(_line_at(x, y, base_row)))
+        res.append(float(np.sqrt(np.mean((y - _line_at(x, y, x)) ** 2))))
     if max(res) > MAX_WALL_RMS:
         raise ChamberNotFound(f"the wall silhouettes are not straight lines (row scatter {max(res):.2f} px > "
                               f"{MAX_WALL_RMS} px): not walls, or a look this search cannot read")
     return SilhouetteWalls(float(top_row), float(base_row), fits[0], fits[1], max(res))
+
+
+def _line_at(x, y, at):
+    """The least-squares line through ``(x, y)`` (``np.polyfit(x, y, 1)``, by its centred sums) at ``at``."""
+    xm, ym = x.mean(), y.mean()
+    dx = x - xm
+    den = float(np.dot(dx, dx))
+    slope = float(np.dot(dx, y - ym)) / den if den > 0 else 0.0
+    return ym + slope * (np.asarray(at, float) - xm)
 
 
 # ---------------------------------------------------------------------- compiled inner loops
