@@ -386,7 +386,7 @@ def silhouette_speed(n_frames, looks=("edge_dark", "defocus", "halo"), n_day=97)
     print("| look | route | TIFF read ms/frame (warm / dropped) | extract ms/frame (warm / dropped) |"
           " extract / read (warm / dropped) | CZI read ms/frame (raw / zstd) | extract from CZI / CZI read"
           " (raw / zstd) | frames ok | tracer setup s | tracked ms (median, max) |"
-          f" searched ms (median, n) | {n_day} frames: ms/frame, / warm TIFF read |")
+          f" searched ms (median, n) | {n_day} frames: ms/frame, / read (warm TIFF, dropped, raw CZI, zstd CZI) |")
     print("|---|---|---|---|---|---|---|---|---|---|---|---|")
     vt = np.linspace(0.0, 4.0, n_frames) ** 1.5 / 2.0
     ratios = {}
@@ -411,7 +411,9 @@ def silhouette_speed(n_frames, looks=("edge_dark", "defocus", "halo"), n_day=97)
                 t_read_c, _ = _median_pass(lambda: _read_all(path), n_frames, lambda: _drop_cache(path))
                 t_ext_c, _ = _median_pass(run, n_frames, lambda: _drop_cache(path))
                 cold = f" / {1e3 * t_read_c:.2f}", f" / {1e3 * t_ext_c:.2f}", f" / {t_ext_c / t_read_c:.1f}x"
-            czi_read, czi_ratio = [], []
+            czi_read, czi_ratio, reads = [], [], {"warm TIFF": t_read}
+            if drop:
+                reads["dropped TIFF"] = t_read_c
             for kind, comp in CZI_KINDS.items():
                 czi = _write_czi(Path(tmp) / f"{name}_{kind}.czi", s.frames, px, comp)
                 if czi is None:
@@ -419,6 +421,7 @@ def silhouette_speed(n_frames, looks=("edge_dark", "defocus", "halo"), n_day=97)
                 t_cr, _ = _median_pass(lambda c=czi: _read_all(c), n_frames)
                 t_ce, _ = _median_pass(lambda c=czi: run(c), n_frames)
                 czi_read.append(f"{1e3 * t_cr:.2f}")
+                reads[f"{kind} CZI"] = t_cr
                 czi_ratio.append(f"{t_ce / t_cr:.1f}x")
                 ratios[f"{name}, CZI {kind}"] = t_ce / t_cr
             setup, per, searched = _tracer_times([np.asarray(f) for f in s.frames], chamber, px)
@@ -429,11 +432,14 @@ def silhouette_speed(n_frames, looks=("edge_dark", "defocus", "halo"), n_day=97)
             ratios[f"{name}, warm TIFF"] = t_ext / t_read
             if drop:
                 ratios[f"{name}, cold TIFF"] = t_ext_c / t_read_c
+            for kind, t in reads.items():
+                ratios[f"{name}, {n_day}-frame day / {kind}"] = day / t
             print(f"| {name} | {ds.attrs['tracer']} | {1e3 * t_read:.2f}{cold[0]} | {1e3 * t_ext:.2f}{cold[1]} |"
                   f" {t_ext / t_read:.1f}x{cold[2]} | {' / '.join(czi_read) or '-'} | {' / '.join(czi_ratio) or '-'} |"
                   f" {int((ds.flag == 'ok').sum())}/{n_frames} | {setup:.2f} |"
                   f" {1e3 * np.median(tracked):.1f}, {1e3 * tracked.max():.1f} |"
-                  f" {1e3 * np.median(sought):.1f}, {int(searched.sum())} | {1e3 * day:.1f}, {day / t_read:.0f}x |",
+                  f" {1e3 * np.median(sought):.1f}, {int(searched.sum())} | {1e3 * day:.1f},"
+                  f" {' / '.join(f'{day / t:.1f}x' for t in reads.values())} |",
                   flush=True)
     print(f"\ndropped: the TIFF evicted from the page cache before each pass (posix_fadvise DONTNEED; on a VM whose"
           f" host caches the disk that is not a real disk figure). CZI: the same frames written by pylibCZIrw,"

@@ -330,6 +330,7 @@ class ProfileSpline:
     residuals: np.ndarray
     _u_of_s: object = field(repr=False)  # arc length -> spline parameter (callable)
     normal_residuals: np.ndarray | None = field(default=None, repr=False)
+    _derivative: object = field(default=None, repr=False)  # spline.derivative(), when already built
 
     def __call__(self, s) -> np.ndarray:
         """Points ``(x, y)`` at arc length(s) ``s`` from the first end, shape (..., 2)."""
@@ -339,7 +340,8 @@ class ProfileSpline:
     def tangent(self, s) -> np.ndarray:
         """Unit tangent vectors at arc length(s) ``s``, shape (..., 2)."""
         s = np.clip(np.asarray(s, float), 0.0, self.length)
-        d = np.moveaxis(np.asarray(self.spline.derivative()(self._u_of_s(s))), 0, -1)
+        der = self.spline.derivative() if self._derivative is None else self._derivative
+        d = np.moveaxis(np.asarray(der(self._u_of_s(s))), 0, -1)
         return d / np.linalg.norm(d, axis=-1, keepdims=True)
 
     def sample(self, step=None, n=None) -> tuple[np.ndarray, np.ndarray]:
@@ -449,7 +451,8 @@ def smooth_profile(points, *, sigma=None, smoothing=None, weights=None, knot_spa
     res[idx] = np.hypot(*off.T)
     d = np.asarray(der(u)).T
     nres[idx] = np.abs(off[:, 1] * d[:, 0] - off[:, 0] * d[:, 1]) / np.maximum(np.hypot(*d.T), 1e-300)
-    return ProfileSpline(spline=spl, length=float(ss[-1]), residuals=res, normal_residuals=nres, _u_of_s=u_of_s)
+    return ProfileSpline(spline=spl, length=float(ss[-1]), residuals=res, normal_residuals=nres, _u_of_s=u_of_s,
+                         _derivative=der)
 
 
 # --------------------------------------------------------------------------- revolution
