@@ -225,25 +225,20 @@ def change_transects(frame, k, flat, light, points, directions, offsets, shift, 
 
 
 @njit(cache=True, nogil=True)
-def _upsample_axis1(coarse, n, block, out):
-    m = coarse.shape[1]
-    for j in range(n):
-        x = min(max((j - 0.5 * (block - 1)) / block, 0.0), m - 1.0)
-        i0 = min(int(x), m - 2)
-        t = x - i0
-        for r in range(coarse.shape[0]):
-            out[r, j] = coarse[r, i0] * (1.0 - t) + coarse[r, i0 + 1] * t
+def _upsample(coarse, i_row, t_row, i_col, t_col, cols, out):
+    for r in range(coarse.shape[0]):  # columns first (fewer rows), then rows
+        for j in range(i_col.size):
+            cols[r, j] = coarse[r, i_col[j]] * (1.0 - t_col[j]) + coarse[r, i_col[j] + 1] * t_col[j]
+    for i in range(i_row.size):
+        for j in range(cols.shape[1]):
+            out[i, j] = cols[i_row[i], j] * (1.0 - t_row[i]) + cols[i_row[i] + 1, j] * t_row[i]
 
 
-@njit(cache=True, nogil=True)
-def _upsample_axis0(coarse, n, block, out):
-    m = coarse.shape[0]
-    for i in range(n):
-        x = min(max((i - 0.5 * (block - 1)) / block, 0.0), m - 1.0)
-        i0 = min(int(x), m - 2)
-        t = x - i0
-        for c in range(coarse.shape[1]):
-            out[i, c] = coarse[i0, c] * (1.0 - t) + coarse[i0 + 1, c] * t
+def _block_centres(n, m, block):
+    """For each of ``n`` px, the block centre at or below it (of ``m``) and its weight on the next one."""
+    x = np.clip((np.arange(n) - 0.5 * (block - 1)) / block, 0.0, m - 1.0)
+    i0 = np.minimum(x.astype(np.int64), m - 2)
+    return i0, x - i0
 
 
 def upsample_linear(coarse, shape, block):
@@ -252,12 +247,12 @@ def upsample_linear(coarse, shape, block):
     coarse[i0 + 1] * t`` with ``x = clip((px - (block - 1) / 2) / block, 0, m - 1)``, ``i0 = min(int(x), m - 2)``,
     ``t = x - i0``).  Each axis of ``coarse`` needs at least 2 blocks."""
     coarse = np.ascontiguousarray(coarse, np.float64)
-    if min(coarse.shape) < 2:
+    if coarse.ndim != 2 or min(coarse.shape) < 2:
         raise ValueError(f"coarse needs at least 2 blocks along each axis, got shape {coarse.shape}")
-    cols = np.empty((coarse.shape[0], int(shape[1])))
-    _upsample_axis1(coarse, int(shape[1]), int(block), cols)
-    out = np.empty((int(shape[0]), int(shape[1])))
-    _upsample_axis0(cols, int(shape[0]), int(block), out)
+    i_row, t_row = _block_centres(int(shape[0]), coarse.shape[0], block)
+    i_col, t_col = _block_centres(int(shape[1]), coarse.shape[1], block)
+    cols, out = np.empty((coarse.shape[0], i_col.size)), np.empty((i_row.size, i_col.size))
+    _upsample(coarse, i_row, t_row, i_col, t_col, cols, out)
     return out
 
 
