@@ -5,10 +5,12 @@ pass with their smoothed transects, band edges, step edges, clipped line fits
 and the flat line's band fit, the dynamic-programming path, banded
 least-squares cubic splines and the tracer's robust profile spline, station
 cleaning and rim bridges, the coarse wall search, dusty wall rows, the
-orientation's ridge filter and block means, solids of revolution, the
-ellipse's scatter sums, point distances and arc volume (and the stored
-profile's ellipse and arc-length resampling in one call each), the rim contact
-figure, nan medians, percentiles and run lengths.  A tracked frame takes a
+orientation's ridge filter and block means (and the light's interpolation
+back from them), solids of revolution, the ellipse's scatter sums, point
+distances and arc volume (and the stored profile's ellipse and arc-length
+resampling in one call each), the rim contact figure, nan medians, percentiles
+and run lengths (and numpy's median and percentile by one selection each,
+in numpy itself).  A tracked frame takes a
 handful of calls: its flat line (``line_band``), both walls
 (``locate_walls``), its pass (``track_pass``) and the pass's end with the final
 spline (``pass_tail``).
