@@ -289,9 +289,10 @@ def speed_and_memory(n_speed, n_mem, quick):
         if hasattr(os, "posix_fadvise"):
             sources["same TIFF, page cache dropped before each pass"] = tiff
         for label, path in sources.items():
-            before = (lambda: _drop_cache(path)) if label.startswith("same TIFF") else None
-            t_read, _ = _median_pass(lambda: _read_all(path), n_speed, before)
-            t_ext, ds = _median_pass(lambda: extract(path, frame_interval=600.0, progress=False), n_speed, before)
+            before = (lambda p=path: _drop_cache(p)) if label.startswith("same TIFF") else None
+            t_read, _ = _median_pass(lambda p=path: _read_all(p), n_speed, before)
+            t_ext, ds = _median_pass(lambda p=path: extract(p, frame_interval=600.0, progress=False), n_speed,
+                                     before)
             ratios[label] = t_ext / t_read
             t_exts[label] = t_ext
             print(f"| {label} | {1e3 * t_read:.2f} | {1e3 * t_ext:.2f} | {1 / t_ext:.0f} | {t_ext / t_read:.1f}x |"
@@ -404,12 +405,12 @@ def silhouette_speed(n_frames, looks=("edge_dark", "defocus", "halo"), n_day=97)
                 return extract(p, chamber=ch, frame_interval=600.0, progress=False)
 
             run()  # (kernels loaded)
-            t_read, _ = _median_pass(lambda: _read_all(path), n_frames)
+            t_read, _ = _median_pass(lambda p=path: _read_all(p), n_frames)
             t_ext, ds = _median_pass(run, n_frames)
             cold = ("", "", "")
             if drop:
-                t_read_c, _ = _median_pass(lambda: _read_all(path), n_frames, lambda: _drop_cache(path))
-                t_ext_c, _ = _median_pass(run, n_frames, lambda: _drop_cache(path))
+                t_read_c, _ = _median_pass(lambda p=path: _read_all(p), n_frames, lambda p=path: _drop_cache(p))
+                t_ext_c, _ = _median_pass(run, n_frames, lambda p=path: _drop_cache(p))
                 cold = f" / {1e3 * t_read_c:.2f}", f" / {1e3 * t_ext_c:.2f}", f" / {t_ext_c / t_read_c:.1f}x"
             czi_read, czi_ratio, reads = [], [], {"warm TIFF": t_read}
             if drop:

@@ -46,7 +46,8 @@ def row(name, vt):
     t_extract = time.perf_counter() - t0
     sc = score(s.truth, ds)
     worst_rim = float(np.nanmax(np.abs(sc["rim_bias_px"])))
-    return (f"| {name:20s} | {ds.attrs['tracer']:10s} | {sc['worst_dv_tol']:8.2f} | {100 * sc['frac_volume_ok']:5.0f} % |"
+    return (f"| {name:20s} | {ds.attrs['tracer']:10s} | {sc['worst_dv_tol']:8.2f} |"
+            f" {100 * sc['frac_volume_ok']:5.0f} % |"
             f" {sc['median_rim_bias_px']:+6.2f} | {worst_rim:5.2f} | {100 * sc['worst_lambda_err']:6.2f} % |"
             f" {sc['n_flagged']:2d}/{len(vt):<2d} | {sc['n_silent']:2d} | {t_render / len(vt):5.1f} s |"
             f" {t_extract / len(vt):5.2f} s |")

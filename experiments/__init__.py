@@ -15,8 +15,8 @@ from osmobulge.experiments.curation import (
     remove_manual_profile,
     save_curation,
     set_chamber_regions,
-    set_rim,
     set_manual_profile,
+    set_rim,
     set_time_origin,
 )
 from osmobulge.experiments.demo import run_demo, write_demo_campaign

@@ -383,7 +383,8 @@ def test_a_rim_saved_in_the_curation_is_the_one_used(tmp_path):
     row, col, r = t.attrs["anchor_row"], t.attrs["anchor_col"], float(t["rim_radius"][0]) / P
     good = [col - r + 1.0, row - 1.0, col + r, row + 1.0]
     water = [good[0], good[1] - 40.0, good[2], good[3] - 40.0]
-    d = _write(tmp_path / "rim", s.frames, name="rim", extra="rim_px = [{:.1f}, {:.1f}, {:.1f}, {:.1f}]\n".format(*good))
+    d = _write(tmp_path / "rim", s.frames, name="rim",
+               extra="rim_px = [{:.1f}, {:.1f}, {:.1f}, {:.1f}]\n".format(*good))
     set_rim(d, water)
     out = run_experiment(d, ["process"])
     assert out.status != "ok" and "given rim" in out.error, (out.status, out.error)
