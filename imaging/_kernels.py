@@ -1054,20 +1054,32 @@ def nanmedian(a):
     return float(_nanmedian_flat(np.ascontiguousarray(a, np.float64).ravel()))
 
 
+def _rank(n, q):
+    """numpy's linear rule for the ``q``-th percentile of ``n`` values: the sorted values' index below it and the
+    weight of the next one (``np.percentile``'s own arithmetic)."""
+    v = (n - 1) * np.true_divide(q, 100)
+    lo = np.floor(v)
+    return int(min(lo, n - 1)), float(v - lo)
+
+
+@njit(cache=True, nogil=True)
+def _lerp(x0, x1, t):
+    """numpy's ``_lerp``: ``x0`` interpolated by ``t`` towards ``x1``."""
+    d = x1 - x0
+    if t >= 0.5:
+        return x1 - d * (1.0 - t)
+    return x0 + d * t
+
+
 def percentile(a, q):
     """``np.percentile(a, q)`` (method "linear") of all the samples (finite), the same to the bit, by one selection
     (numpy selects the two order statistics it interpolates between at once; see :func:`median`)."""
     x = np.asarray(a, np.float64).ravel()
-    n = x.size
-    pos = (n - 1) * (float(q) / 100.0)  # (numpy's virtual index and its weight)
-    lo = int(np.floor(pos))
-    t = pos - lo
-    if lo + 1 >= n:
+    lo, t = _rank(x.size, q)
+    if lo + 1 >= x.size:
         return float(x.max())
     p = np.partition(x, lo + 1)
-    a0, b0 = float(p[: lo + 1].max()), float(p[lo + 1])
-    diff = b0 - a0
-    return b0 - diff * (1.0 - t) if t >= 0.5 else a0 + diff * t  # (numpy's _lerp)
+    return float(_lerp(float(p[: lo + 1].max()), float(p[lo + 1]), t))
 
 
 def median(a):

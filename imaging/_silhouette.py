@@ -29,6 +29,7 @@ from numba import njit
 from scipy import ndimage
 
 from osmobulge.imaging._chamber import ChamberNotFound
+from osmobulge.imaging._kernels import _lerp, _rank
 
 __all__ = ["FlatMaps", "SilhouetteWalls", "find_walls"]
 
@@ -345,14 +346,6 @@ def _line_at(x, y, at):
 # numpy's error model (x / 0 is inf or nan, not ZeroDivisionError).
 
 
-def _rank(n, q):
-    """numpy's linear rule for the ``q``-th percentile of ``n`` values: the sorted values' index below it and the
-    weight of the next one (``np.percentile``'s own arithmetic)."""
-    v = (n - 1) * np.true_divide(q, 100)
-    lo = np.floor(v)
-    return int(min(lo, n - 1)), float(v - lo)
-
-
 def _percentile_rows(a, q):
     """``np.percentile(a, q, axis=1)`` of a 2-D array (of a turned view: read along its stored rows)."""
     if abs(a.strides[0]) < abs(a.strides[1]):
@@ -454,15 +447,6 @@ def _percentile_of(a, n, lo, t, b):
             x0 = max(x0, a[j])
         x1 = x0
     return _lerp(x0, x1, t)
-
-
-@njit(cache=True, nogil=True)
-def _lerp(x0, x1, t):
-    """numpy's ``_lerp``: ``x0`` interpolated by ``t`` towards ``x1``."""
-    d = x1 - x0
-    if t >= 0.5:
-        return x1 - d * (1.0 - t)
-    return x0 + d * t
 
 
 @njit(cache=True, nogil=True)

@@ -364,9 +364,11 @@ def sorted_quantile(x, q):
     return np.interp(np.asarray(q, float) * (len(x) - 1), np.arange(len(x)), x)
 
 
-def _arc_length_table(spl, n=4001, derivative=None):
+def _arc_length_table(derivative, n=4001):
+    """Parameter ``u`` and arc length at ``n`` even steps of ``u`` (trapezoids of the speed from the spline's
+    ``derivative``)."""
     u = np.linspace(0.0, 1.0, n)
-    d = np.asarray((spl.derivative() if derivative is None else derivative)(u))
+    d = np.asarray(derivative(u))
     speed = np.hypot(d[0], d[1])
     s = np.concatenate([[0.0], np.cumsum(0.5 * (speed[1:] + speed[:-1]) * np.diff(u))])
     return u, s
@@ -443,7 +445,7 @@ def smooth_profile(points, *, sigma=None, smoothing=None, weights=None, knot_spa
         tck, u = interpolate.splprep(pts_ok.T, u=u, s=float(smoothing), w=ww, k=3, quiet=1)
         spl = interpolate.BSpline.construct_fast(tck[0], np.asarray(tck[1]).T, 3, axis=1)
     der = spl.derivative()
-    uu, ss = _arc_length_table(spl, n=int(np.clip(8 * (len(spl.t) - 7), 1025, 4001)), derivative=der)  # 8 a span
+    uu, ss = _arc_length_table(der, n=int(np.clip(8 * (len(spl.t) - 7), 1025, 4001)))  # 8 per knot span
     u_of_s = partial(np.interp, xp=ss, fp=uu)  # arc length -> spline parameter (monotone table)
     off = pts_ok - np.asarray(spl(u)).T
     res, nres = np.full(len(pts), np.nan), np.full(len(pts), np.nan)
