@@ -83,6 +83,22 @@ HELD_OUT_LOOKS: dict[str, Look] = {
         replace(_N, noise_sigma=0.012, blur_sigma=0.9, vignetting=0.15),
         chamber=(180e-6, 110e-6, 22e-6), seed=33,
     ),
+    # added 2026-12-05 after the one-pass track (stop 29), with the nuisances no look had had together: stage
+    # drift, shot noise, 12 bits, dust, pixels other than 0.8/2 um; measured once, blind (25 frames, Vtilde 0..4:
+    # 0 flagged, 0 silent, worst volume error 0.34 and 0.51 of the tolerance)
+    "ho_blind_1205": Look(
+        Optics(n_elastomer=1.415, n_liquid=1.352, condenser_na=0.16, defocus=7e-6, halo_strength=0.4,
+               halo_width=2.5e-6),
+        replace(_N, noise_sigma=0.006, poisson_photons=3000.0, blur_sigma=0.7, drift_sigma=0.3, vignetting=0.1,
+                bit_depth=12),
+        chamber=(120e-6, 110e-6, 22e-6), pixel_size=0.65e-6, seed=41,
+    ),
+    "ho_blind_1205b": Look(
+        Optics(n_elastomer=1.425, n_liquid=1.36, objective_na=0.3, defocus=-10e-6, condenser_na=0.08),
+        replace(_N, polarity=-1, noise_sigma=0.018, illumination_gradient=0.25, illumination_angle=30.0,
+                drift_sigma=0.5, dust_count=6),
+        chamber=(170e-6, 110e-6, 21e-6), pixel_size=1.0e-6, seed=42,
+    ),
 }
 
 
