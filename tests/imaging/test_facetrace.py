@@ -444,3 +444,23 @@ def test_the_local_light_is_the_gaussian_of_the_frame(edge_dark):
     odd = img[:501, :333]  # (sizes that are not multiples of the block)
     err = np.abs(_relative(odd) / ndimage.gaussian_filter(odd, 25.0, mode="nearest") - 1.0)
     assert err[25:-25, 25:-25].max() < 2e-3 and err.max() < 1e-2
+
+
+def test_stations_are_denser_at_the_feet():
+    """_station_arcs: every foot_step px within foot_arc of either end, every ~step px between, the ends (the
+    feet) left out; a curve shorter than two foot arcs is all foot_step; _station_shares add up to the arc."""
+    from osmobulge.imaging._facetrace import _station_arcs, _station_shares
+
+    s = _station_arcs(500.0, 3.0, 1.5, foot_arc=40.0)
+    d = np.diff(s)
+    assert s[0] == pytest.approx(1.5) and s[-1] == pytest.approx(498.5) and np.all(d > 0)
+    foot = d[(s[1:] <= 40.0) | (s[:-1] >= 460.0)]
+    assert np.all(foot <= 1.5 + 1e-9) and np.sum(np.abs(foot - 1.5) < 1e-9) >= foot.size - 2
+    mid = d[(s[:-1] >= 40.0) & (s[1:] <= 460.0)]
+    assert np.all(mid <= 3.0) and np.all(mid > 2.9)
+    np.testing.assert_allclose(np.diff(_station_arcs(60.0, 3.0, 1.5, foot_arc=40.0)), 1.5)
+    np.testing.assert_allclose(np.diff(_station_arcs(90.0, 4.5, None)), 4.5)  # (uniform: the two-pass track)
+    # shares on a straight line: the stations' span, each end station's whole gap
+    xy = np.column_stack((s, np.zeros_like(s)))
+    shares = _station_shares(xy)
+    assert shares.sum() == pytest.approx(s[-1] - s[0] + 0.5 * (d[0] + d[-1]))
