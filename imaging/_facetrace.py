@@ -84,8 +84,10 @@ _JUMP_PX = 3.0
 #: fraction of rays over the dome whose edge jumped, or that have none, that flags poor_fit
 _JUMP_FLAG, _LOST_FLAG = 0.05, 0.10
 #: horizontal transects (rows) the change's noise is measured on: on the 21 looks at 9 frames within -4..+7 % of
-#: 64 columns' (16 columns: -9..+5 %), in half the time (a row is contiguous in memory, a column strides)
-_NOISE_ROWS = 12
+#: 64 columns' (16 columns: -9..+5 %), in half the time (a row is contiguous in memory, a column strides); their
+#: samples every _NOISE_STEP px, every other row's half a px on: the same mix of whole- and half-px positions
+#: (whose bilinear samples average two pixels) as every 0.5 px, within -0.7..+2.0 % of it, in half the samples
+_NOISE_ROWS, _NOISE_STEP = 12, 1.0
 #: reach (px, each side) of the search along the last frame's outer face's normals, and its stations' spacing
 #: (px; samples every _RAY_STEP as on the rays)
 _TRACK_REACH, _TRACK_STATIONS = 30.0, 4.5
@@ -676,8 +678,9 @@ class SilhouetteTracer:
         transects across the view; the dome, a minority of the samples, included); never below 1e-4 (the first
         frame is its own reference and changes by nothing)."""
         rows = np.linspace(2.0, max(w.top_row - 5.0, 10.0), _NOISE_ROWS)
-        v = sample(np.column_stack((np.zeros_like(rows), rows)), np.tile([1.0, 0.0], (rows.size, 1)),
-                   np.arange(0.0, self.view_shape[1] - 1.0, _RAY_STEP))
+        starts = 0.5 * (np.arange(_NOISE_ROWS) % 2)  # (columns)
+        v = sample(np.column_stack((starts, rows)), np.tile([1.0, 0.0], (rows.size, 1)),
+                   np.arange(0.0, self.view_shape[1] - 1.5, _NOISE_STEP))
         return max(1.4826 * median(np.abs(v - median(v))), 1e-4)
 
     def _rays(self, sample, w):
