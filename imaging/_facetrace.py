@@ -59,6 +59,7 @@ from osmobulge.imaging._kernels import (
     native_frame,
     outer_edges,
     percentile,
+    running_percentile,
     upsample_linear,
 )
 from osmobulge.imaging._silhouette import FlatMaps, find_walls
@@ -358,8 +359,7 @@ def _first_edges(v, t, sign, noise, size=9):
     edge = outer_edges(prof, float(thr), int(12.0 / abs(float(t[1] - t[0]))))
     te = np.interp(edge, np.arange(t.size), t, left=np.nan, right=np.nan)
     found = np.isfinite(te)
-    med = ndimage.median_filter(np.where(found, te, np.nanmedian(te) if found.any() else 0.0), size=size,
-                                mode="nearest")
+    med = running_percentile(np.where(found, te, np.nanmedian(te) if found.any() else 0.0), 50.0, size)  # (median)
     jump = found & (np.abs(te - med) > _JUMP_PX)
     strong = strength > 10.0 * noise
     figs = {"dome_contrast": float(np.median(strength) / max(noise, 1e-12)),
@@ -888,15 +888,15 @@ class SilhouetteTracer:
         for _ in range(3):
             mid = xy - 0.5 * lthick[:, None] * normal
             mu, mz = mid[:, 0], mid[:, 1] + 0.5 * l0
-            try:
-                m = revolution_measures(_ends(-rim_l, mu[mz > 0], rim_r), _ends(0.0, mz[mz > 0], 0.0))
-            except ValueError as err:
-                out.message = str(err)
-                out.flag, out.flag_figure, out.flag_value = "poor_fit", "residual_rms", float(resid)
-                return out
             # (on the curve from rim to rim: the outer face's feet offset inwards lie inside the rim)
             lthick = _thickness(_ends(-rim_l, mu, rim_r), _ends(0.0, np.maximum(mz, 0.0), 0.0), rim_l, rim_r,
                                 l0)[1:-1]
+        try:  # (the third mid-surface's)
+            m = revolution_measures(_ends(-rim_l, mu[mz > 0], rim_r), _ends(0.0, mz[mz > 0], 0.0))
+        except ValueError as err:
+            out.message = str(err)
+            out.flag, out.flag_figure, out.flag_value = "poor_fit", "residual_rms", float(resid)
+            return out
         keep = mz > 0.0
         mu, mz = _ends(-rim_l, mu[keep], rim_r), _ends(0.0, mz[keep], 0.0)
         out.u, out.z = mu, mz
