@@ -675,8 +675,9 @@ class SilhouetteTracer:
 
     def _noise(self, sample, w):
         """Noise of the change in the water above the top face (scaled MAD over ``_NOISE_ROWS`` horizontal
-        transects across the view; the dome, a minority of the samples, included); never below 1e-4 (the first
-        frame is its own reference and changes by nothing)."""
+        transects across the view, sampled every ``_NOISE_STEP`` px, every other one from half a px on; the
+        dome, a minority of the samples, included); never below 1e-4 (the first frame is its own reference and
+        changes by nothing)."""
         rows = np.linspace(2.0, max(w.top_row - 5.0, 10.0), _NOISE_ROWS)
         starts = 0.5 * (np.arange(_NOISE_ROWS) % 2)  # (columns)
         v = sample(np.column_stack((starts, rows)), np.tile([1.0, 0.0], (rows.size, 1)),
