@@ -49,6 +49,7 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
+from numba import njit
 from scipy import ndimage
 
 from osmobulge.imaging._chamber import ROTATIONS, ChamberGeometry, ChamberNotFound, FrameView, Line, Well
@@ -180,11 +181,20 @@ def _relative(img, sigma=25.0, block=4):
     return np.maximum(bg, 1e-6 * max(float(bg.max()), 1e-30))
 
 
+@njit(cache=True, nogil=True)
 def _profiles(img):
     """The mean of ``img`` over its columns and over its rows, each less its own mean: what the drift is read
-    from."""
-    img = np.asarray(img, float)
-    r, c = img.mean(axis=1), img.mean(axis=0)
+    from (compiled: the frame's own dtype summed in float64, without a float copy of the region)."""
+    h, w = img.shape
+    r, c = np.empty(h), np.zeros(w)
+    for i in range(h):
+        acc = 0.0
+        for j in range(w):
+            v = float(img[i, j])
+            acc += v
+            c[j] += v
+        r[i] = acc / w
+    c /= h
     return r - r.mean(), c - c.mean()
 
 
@@ -355,14 +365,14 @@ def _first_edges(v, t, sign, noise, size=9):
     extreme = v[np.arange(v.shape[0]), np.argmax(np.abs(v), axis=1)]
     strength = np.abs(extreme)
     prof = np.clip(sign * v, 0.0, None)
-    thr = max(8.0 * noise, 0.2 * float(np.median(prof.max(axis=1))))
+    thr = max(8.0 * noise, 0.2 * median(prof.max(axis=1)))
     edge = outer_edges(prof, float(thr), int(12.0 / abs(float(t[1] - t[0]))))
     te = np.interp(edge, np.arange(t.size), t, left=np.nan, right=np.nan)
     found = np.isfinite(te)
-    med = running_percentile(np.where(found, te, np.nanmedian(te) if found.any() else 0.0), 50.0, size)  # (median)
+    med = running_percentile(np.where(found, te, median(te[found]) if found.any() else 0.0), 50.0, size)  # (median)
     jump = found & (np.abs(te - med) > _JUMP_PX)
     strong = strength > 10.0 * noise
-    figs = {"dome_contrast": float(np.median(strength) / max(noise, 1e-12)),
+    figs = {"dome_contrast": median(strength) / max(noise, 1e-12),
             "edge_sign": float(np.mean(np.sign(extreme[strong]) == sign)) if strong.any() else 0.0}
     return te, found, jump, thr, figs
 
@@ -394,6 +404,7 @@ def _station_shares(xy):
     return np.concatenate(([seg[0]], 0.5 * (seg[1:] + seg[:-1]), [seg[-1]]))
 
 
+@njit(cache=True, nogil=True)
 def _thickness(u, z, rim_l, rim_r, l0):
     r"""The film's thickness along a mid-surface curve (left rim -> right rim), px.
 
@@ -405,19 +416,33 @@ def _thickness(u, z, rim_l, rim_r, l0):
     :math:`l_0/\lambda_1` at the rim.  Whatever the law, :math:`\int l\,dA =
     l_0 \pi R^2` (the film over the well is conserved), so the volume between
     the outer face and the mid-surface is right to first order in :math:`l`.
+
+    (Compiled: called three times a frame on a curve of ~700 points; the pole
+    is the point nearest the axis, :math:`\lambda_1` at least 1, :math:`\lambda_2`
+    at least 1e-3 and equal to :math:`\lambda_1` within 1 px of the pole, the
+    thickness at most :math:`l_0`; nan stays nan.)
     """
-    arc = np.concatenate(([0.0], np.cumsum(np.hypot(np.diff(u), np.diff(z)))))
+    n = u.size
+    arc = np.empty(n)
+    arc[0] = 0.0
+    for i in range(1, n):
+        arc[i] = arc[i - 1] + np.hypot(u[i] - u[i - 1], z[i] - z[i - 1])
     pole = int(np.argmin(np.abs(u)))
-    out = np.empty_like(u)
-    for sl, rim, dist in ((slice(0, pole + 1), rim_l, arc[: pole + 1]),
-                          (slice(pole + 1, None), rim_r, arc[-1] - arc[pole + 1 :])):
-        length = max(float(arc[pole] if sl.start == 0 else arc[-1] - arc[pole]), 1e-9)
-        lam1 = max(length / rim, 1.0)
-        r0 = rim * (1.0 - np.clip(dist, 0.0, length) / length)  # material radius
-        r = np.abs(u[sl])
-        lam2 = np.where(r0 > 1.0, r / np.maximum(r0, 1e-9), lam1)
-        out[sl] = l0 / (lam1 * np.maximum(lam2, 1e-3))
-    return np.minimum(out, l0)
+    out = np.empty(n)
+    for i in range(n):
+        if i <= pole:  # (the left half: arc length from its rim; the right one's from its own)
+            rim, dist, length = rim_l, arc[i], arc[pole]
+        else:
+            rim, dist, length = rim_r, arc[n - 1] - arc[i], arc[n - 1] - arc[pole]
+        length = length if not length < 1e-9 else 1e-9
+        lam1 = length / rim
+        lam1 = lam1 if not lam1 < 1.0 else 1.0
+        r0 = rim * (1.0 - min(max(dist, 0.0), length) / length)  # material radius
+        lam2 = abs(u[i]) / (r0 if not r0 < 1e-9 else 1e-9) if r0 > 1.0 else lam1
+        lam2 = lam2 if not lam2 < 1e-3 else 1e-3
+        t = l0 / (lam1 * lam2)
+        out[i] = t if not t > l0 else l0
+    return out
 
 
 class SilhouetteTracer:
@@ -633,6 +658,7 @@ class SilhouetteTracer:
         frame = np.asarray(frame)
         if frame.shape != self.shape:
             raise ValueError(f"frame {index} has shape {frame.shape}, expected {self.shape}")
+        frame = native_frame(frame)  # (no copy when it is already the kernels' kind)
         img = np.rot90(frame, self.k)  # (a view: only the crops the walls are read on are copied)
         out = FrameTrace(index=index)
         try:
@@ -645,7 +671,6 @@ class SilhouetteTracer:
         out.geometry, out.drift = g, (dx, dy)
         if manual is not None:
             return self._from_points(frame, g, out, manual)
-        frame = native_frame(frame)
 
         def sample(points, directions, offsets):
             return self._change(frame, points, directions, offsets, dx, dy)

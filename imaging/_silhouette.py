@@ -316,28 +316,68 @@ def _fit_walls(sd, peaks, r0, r1, top_row, base_row):
     right = _wall_edges(strip, cr)
     fits, res = [], []
     for u in (left, right):
-        ok = np.isfinite(u)
-        if ok.sum() < 5:
+        at, rms, n = _clipped_line(rows.astype(float), u, float(base_row))
+        if n < 5:
             raise ChamberNotFound("a wall's silhouette edge could not be followed down the base")
-        x, y = rows[ok].astype(float), u[ok]
-        r = y - _line_at(x, y, x)
-        keep = np.abs(r) <= max(3.0 * np.std(r), 0.3)
-        x, y = x[keep], y[keep]
-        fits.append(float(_line_at(x, y, base_row)))
-        res.append(float(np.sqrt(np.mean((y - _line_at(x, y, x)) ** 2))))
+        fits.append(float(at))
+        res.append(float(rms))
     if max(res) > MAX_WALL_RMS:
         raise ChamberNotFound(f"the wall silhouettes are not straight lines (row scatter {max(res):.2f} px > "
                               f"{MAX_WALL_RMS} px): not walls, or a look this search cannot read")
     return SilhouetteWalls(float(top_row), float(base_row), fits[0], fits[1], max(res))
 
 
-def _line_at(x, y, at):
-    """The least-squares line through ``(x, y)`` (``np.polyfit(x, y, 1)``, by its centred sums) at ``at``."""
-    xm, ym = x.mean(), y.mean()
-    dx = x - xm
-    den = float(np.dot(dx, dx))
-    slope = float(np.dot(dx, y - ym)) / den if den > 0 else 0.0
-    return ym + slope * (np.asarray(at, float) - xm)
+@njit(cache=True, nogil=True)
+def _line_at(x, y, keep, at):
+    """The least-squares line through the points ``(x, y)`` in ``keep`` (``np.polyfit(x[keep], y[keep], 1)``,
+    by its centred sums) at ``at``: ``(value, mean x, mean y, slope)``; slope 0 for no spread in x."""
+    m, sx, sy = 0, 0.0, 0.0
+    for i in range(x.size):
+        if keep[i]:
+            m += 1
+            sx += x[i]
+            sy += y[i]
+    xm, ym = sx / max(m, 1), sy / max(m, 1)
+    sxx, sxy = 0.0, 0.0
+    for i in range(x.size):
+        if keep[i]:
+            sxx += (x[i] - xm) * (x[i] - xm)
+            sxy += (x[i] - xm) * (y[i] - ym)
+    slope = sxy / sxx if sxx > 0 else 0.0
+    return ym + slope * (at - xm), xm, ym, slope
+
+
+@njit(cache=True, nogil=True)
+def _clipped_line(x, y, at):
+    """:func:`_fit_walls`' line of one wall through the finite ``(x, y)``: the least-squares line, fitted again
+    without the points more than ``max(3 std, 0.3)`` px off it (std of the residuals, numpy's ``ddof=0``); its
+    value at ``at``, the rms of the kept points' residuals from it, and the number of finite points (the
+    values are nan below 2)."""
+    keep = np.isfinite(y)
+    n = int(keep.sum())
+    if n < 2:
+        return np.nan, np.nan, n
+    _, xm, ym, slope = _line_at(x, y, keep, at)
+    r = np.empty(n)
+    c = 0
+    for i in range(x.size):
+        if keep[i]:
+            r[c] = y[i] - (ym + slope * (x[i] - xm))
+            c += 1
+    lim = max(3.0 * np.std(r), 0.3)
+    c = 0
+    for i in range(x.size):
+        if keep[i]:
+            keep[i] = abs(r[c]) <= lim
+            c += 1
+    value, xm, ym, slope = _line_at(x, y, keep, at)
+    ss, m = 0.0, 0
+    for i in range(x.size):
+        if keep[i]:
+            d = y[i] - (ym + slope * (x[i] - xm))
+            ss += d * d
+            m += 1
+    return value, np.sqrt(ss / m), n
 
 
 # ---------------------------------------------------------------------- compiled inner loops

@@ -167,6 +167,28 @@ def test_spline_normal_residuals_are_the_points_distances_from_the_curve():
         assert np.max(spl.residuals - spl.normal_residuals) > 0.3
 
 
+def test_spline_derivative_is_scipys_to_the_bit():
+    """The profile spline's derivative (built without scipy's ``BSpline.derivative`` checks) has scipy's knots,
+    coefficients and values to the bit, on smoothing and regression splines of noisy domes and a 1-D spline."""
+    from scipy import interpolate
+
+    from osmobulge.imaging.geometry import _derivative
+
+    rng = np.random.default_rng(4)
+    at = np.linspace(0.0, np.pi, 400)
+    for sigma, knots in ((0.5, None), (1.0, None), (None, 12.0)):
+        pts = (300.0 + rng.normal(0.0, 0.4, at.size))[:, None] * np.c_[np.cos(at), 0.7 * np.sin(at)]
+        spl = smooth_profile(pts, sigma=sigma, knot_spacing=knots).spline
+        mine, theirs = _derivative(spl), spl.derivative()
+        np.testing.assert_array_equal(mine.t, theirs.t)
+        np.testing.assert_array_equal(mine.c, theirs.c)
+        u = np.linspace(0.0, 1.0, 777)
+        np.testing.assert_array_equal(mine(u), theirs(u))
+        assert (mine.k, mine.axis, mine.extrapolate) == (theirs.k, theirs.axis, theirs.extrapolate)
+    one = interpolate.make_interp_spline(np.linspace(0, 1, 20), np.sin(np.linspace(0, 3, 20)), k=3)
+    np.testing.assert_array_equal(_derivative(one)(u), one.derivative()(u))
+
+
 def test_spline_validation():
     with pytest.raises(ValueError, match="shape"):
         smooth_profile(np.zeros((5, 3)))

@@ -334,12 +334,46 @@ def test_percentiles_and_medians_are_numpys():
 
 def test_wall_line_is_numpys_least_squares_line():
     """_line_at (the centred sums) reads the same line as np.polyfit(x, y, 1) within 1e-9 px, rows in the
-    hundreds as the walls' are."""
+    hundreds as the walls' are, on the points kept only."""
     from osmobulge.imaging._silhouette import _line_at
 
     rng = np.random.default_rng(6)
     for _ in range(50):
         x = np.sort(rng.uniform(0.0, 1000.0, int(rng.integers(5, 300))))
         y = rng.uniform(-500, 500) + rng.normal(0.0, 0.05) * x + rng.normal(0.0, 0.3, x.size)
-        at = np.r_[x[:3], rng.uniform(0.0, 1000.0)]
-        np.testing.assert_allclose(_line_at(x, y, at), np.polyval(np.polyfit(x, y, 1), at), rtol=0, atol=1e-9)
+        keep = rng.random(x.size) < 0.8
+        keep[:2] = True
+        for at in np.r_[x[:3], rng.uniform(0.0, 1000.0)]:
+            np.testing.assert_allclose(_line_at(x, y, keep, at)[0],
+                                       np.polyval(np.polyfit(x[keep], y[keep], 1), at), rtol=0, atol=1e-9)
+
+
+def test_clipped_wall_line_is_the_numpy_rule():
+    """_clipped_line (compiled) gives what the rule says in numpy: the line through the finite points, again
+    without those more than max(3 std, 0.3) px off it, read at the base row, with the kept points' rms; an
+    outlier row (a speck on the wall) is dropped and does not move the wall."""
+    from osmobulge.imaging._silhouette import _clipped_line
+
+    rng = np.random.default_rng(7)
+    for trial in range(60):
+        x = np.arange(300.0, 300.0 + rng.integers(6, 120))
+        y = rng.uniform(100, 900) + rng.normal(0.0, 0.02) * x + rng.normal(0.0, rng.uniform(0.02, 0.5), x.size)
+        y[rng.random(x.size) < 0.1] = np.nan
+        if trial % 3 == 0:
+            y[int(rng.integers(0, x.size))] += 6.0  # (a speck)
+        ok = np.isfinite(y)
+        xo, yo = x[ok], y[ok]
+        r = yo - np.polyval(np.polyfit(xo, yo, 1), xo)
+        keep = np.abs(r) <= max(3.0 * np.std(r), 0.3)
+        line = np.polyfit(xo[keep], yo[keep], 1)
+        want_rms = np.sqrt(np.mean((yo[keep] - np.polyval(line, xo[keep])) ** 2))
+        at, rms, n = _clipped_line(x, y, 290.0)
+        assert n == ok.sum()
+        np.testing.assert_allclose([at, rms], [np.polyval(line, 290.0), want_rms], rtol=0, atol=1e-9)
+    # a clean wall with one speck: the wall is where the clean rows put it
+    x = np.arange(300.0, 360.0)
+    y = 500.0 + 0.01 * (x - 300.0) + rng.normal(0.0, 0.1, x.size)
+    clean = _clipped_line(x, y, 290.0)[0]
+    y[20] += 8.0
+    assert abs(_clipped_line(x, y, 290.0)[0] - clean) < 0.02
+    assert _clipped_line(x, np.full(x.size, np.nan), 290.0)[2] == 0
