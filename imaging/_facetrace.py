@@ -27,12 +27,16 @@ lines.  :class:`SilhouetteTracer` therefore reads, in each bulge-up frame:
    is not it) and on its outer flank the steepest rise (sub-pixel) is the
    silhouette edge.  Rays whose edge jumps from its
    neighbours' (another fringe, dust) are dropped and counted;
-4. **the mid-surface**: the outer face offset inwards by half the film's
-   thickness :math:`l = l_0 \pi R^2 / A` (incompressible film of uniform
-   stretch over the rim disc, :math:`R` the rim radius); to first order in
+4. **the mid-surface**: the outer face (a smoothing spline through its
+   points only) offset inwards by half the film's thickness (incompressible
+   film of uniform meridional stretch, :func:`_thickness`; the film over the
+   well holds :math:`l_0 \pi R_0^2`, :math:`R_0` the first frame's rim radius),
+   then bridged to the rim: the rim is a point of the mid-surface, while the
+   outer face meets the top face about :math:`(l/2)\tan(\beta/2)` outside it
+   (:math:`\beta` the angle the film leaves the rim at).  To first order in
    :math:`l` the volume between the outer face and the mid-surface is
-   :math:`l_0 \pi R^2 / 2` whatever the stretch's distribution, so the volume
-   does not depend on that assumption;
+   :math:`l_0 \pi R_0^2 / 2` whatever the stretch's distribution, so the
+   volume does not depend on that assumption;
 5. **measures and flags**: volume and area of both halves
    (:func:`osmobulge.imaging.geometry.revolution_measures`) and the quality
    figures of :class:`osmobulge.imaging.trace.FrameTrace`, with two of this route:
@@ -79,8 +83,14 @@ _RAY_STEP, _SMOOTH = 0.5, 0.7
 #: _NORMAL_STEP); on the 21 looks at 9 frames, every frame searched, volumes within 1e-3 of 0.5 px steps', the
 #: same flags; a searched frame 56 -> 37 ms
 _SEARCH_STEP = 1.0
-#: scatter (px) of the smoothing splines: of the final outer face, and of the curves whose normals are sampled
-_FINAL_SIGMA, _FIRST_SIGMA = 0.5, 1.0
+#: scatter (px) of the smoothing splines: of the curves whose normals are sampled, and of the outer face's curve
+#: with its feet at the rim kept for the next frame's one pass (1.0 there: one frame in four fell back to the
+#: two-pass track on a series of coarse steps)
+_FIRST_SIGMA, _TRACK_SIGMA = 1.0, 0.5
+#: and at least that of the outer face measured (its points scatter 0.05-0.15 px about it on the looks: 0.5 let a
+#: curve of few knots lie 0.3-0.6 px off a dome's pole at 2 um/px, the smoothing spline's bias where it bends most;
+#: noisier points set their own, their scaled MAD about the stiffer curve)
+_FACE_SIGMA = 0.25
 #: an edge further than this (px) from the running median of its neighbours' is a jump
 _JUMP_PX = 3.0
 #: fraction of rays over the dome whose edge jumped, or that have none, that flags poor_fit
@@ -97,8 +107,8 @@ _TRACK_REACH, _TRACK_STATIONS = 30.0, 4.5
 #: reach and step (px); within _FOOT_ARC_PX of arc from either foot, where the dome turns into the top face,
 #: stations every _FOOT_STEP px (:func:`_station_arcs`).  Against 1.5 px everywhere, on the 7 dense 25-frame
 #: looks: the same flags, worst volume error / tolerance lower on all 7 (e.g. edge_dark 0.32 -> 0.27), median
-#: within +0.005/-0.013; a tracked frame 12.4 -> 8.2 ms.  (3 px everywhere: the spline cut the feet's corner,
-#: -0.1 % of the volume; 4.5 px in the middle: no faster)
+#: within +0.005/-0.013; a tracked frame 12.4 -> 8.2 ms.  (3 px everywhere: the final spline, then through the
+#: rim, cut the feet's corner, -0.1 % of the volume; 4.5 px in the middle: no faster)
 _STATION_STEP, _NORMAL_REACH, _NORMAL_STEP = 3.0, 8.0, 0.25
 _FOOT_STEP, _FOOT_ARC_PX = 1.5, 40.0
 #: arc (px) of the running median a one-pass track's edges are compared with (its stations': as the two-pass
@@ -385,14 +395,23 @@ def _ends(a, x, b):
 def _station_arcs(length, step, foot_step=None, foot_arc=_FOOT_ARC_PX):
     """Arc lengths (px) of the stations along a curve of ``length`` px, not its two ends (the feet): every
     ``step`` px, and every ``foot_step`` px within ``foot_arc`` px of either end (where the dome turns into the
-    top face: the final spline bridges from the rim to the first station above the feet, and sparser stations
-    there let it cut the corner, by 0.5-3 px at 3 px spacing, -0.1 % of the volume)."""
+    top face: measured while the final curve still ran through the rim, sparser stations there let it cut the
+    corner, by 0.5-3 px at 3 px spacing, -0.1 % of the volume; they are the face's ends now)."""
     if foot_step is None or length <= 2.0 * foot_arc:
         step = step if foot_step is None else foot_step
         return np.linspace(0.0, length, max(int(np.ceil(length / step)) + 1, 3))[1:-1]
     ends = np.arange(foot_step, foot_arc, foot_step)
     mid = np.linspace(foot_arc, length - foot_arc, max(int(np.ceil((length - 2.0 * foot_arc) / step)) + 1, 2))
     return np.concatenate((ends, mid, length - ends[::-1]))
+
+
+def _scatter(u, z):
+    """The scatter (px) of points along a curve across it: the scaled MAD of their second differences over
+    sqrt(6) (white noise of sigma along the normals gives second differences of sigma sqrt(6); a smooth curve's own
+    bend, curvature times the spacing squared, is 0.03 px at 3 px on a radius of 300 px); 0 for fewer than 5."""
+    if len(u) < 5:
+        return 0.0
+    return 1.4826 * median(np.hypot(np.diff(u, 2), np.diff(z, 2))) / np.sqrt(6.0)
 
 
 def _station_shares(xy):
@@ -405,17 +424,20 @@ def _station_shares(xy):
 
 
 @njit(cache=True, nogil=True)
-def _thickness(u, z, rim_l, rim_r, l0):
+def _thickness(u, z, r0_l, r0_r, l0):
     r"""The film's thickness along a mid-surface curve (left rim -> right rim), px.
 
     Kinematics of an incompressible film of uniform meridional stretch: each
-    half's material radius :math:`R_0` runs linearly in arc length from the
-    rim (:math:`R_0 = R`) to the pole (0), so :math:`\lambda_1 = L/R` (arc
-    length over rim radius), :math:`\lambda_2 = r/R_0` and
-    :math:`l = l_0/(\lambda_1 \lambda_2)`: :math:`l_0/\lambda_1^2` at the pole,
-    :math:`l_0/\lambda_1` at the rim.  Whatever the law, :math:`\int l\,dA =
-    l_0 \pi R^2` (the film over the well is conserved), so the volume between
-    the outer face and the mid-surface is right to first order in :math:`l`.
+    half's material radius runs linearly in arc length :math:`s` from
+    :math:`R_0` at the rim to 0 at the pole, :math:`R_0` (``r0_l``, ``r0_r``)
+    the rim radius in the flat first frame, whose film is :math:`l_0` thick
+    (the rim's later widening, the pre-stretch, stretches that film and adds
+    none).  So :math:`\lambda_1 = L/R_0` (half the curve's arc length over
+    it), :math:`\lambda_2 = r/(R_0 (1 - s/L))` and :math:`l = l_0/(\lambda_1
+    \lambda_2)`: :math:`l_0/\lambda_1^2` at the pole, :math:`l_0/(\lambda_1
+    \lambda_{pre})` at the rim.  Whatever the law, :math:`\int l\,dA = l_0
+    \pi R_0^2` (the film over the well is conserved), so the volume between the
+    outer face and the mid-surface is right to first order in :math:`l`.
 
     (Compiled: called three times a frame on a curve of ~700 points; the pole
     is the point nearest the axis, :math:`\lambda_1` at least 1, :math:`\lambda_2`
@@ -431,9 +453,9 @@ def _thickness(u, z, rim_l, rim_r, l0):
     out = np.empty(n)
     for i in range(n):
         if i <= pole:  # (the left half: arc length from its rim; the right one's from its own)
-            rim, dist, length = rim_l, arc[i], arc[pole]
+            rim, dist, length = r0_l, arc[i], arc[pole]
         else:
-            rim, dist, length = rim_r, arc[n - 1] - arc[i], arc[n - 1] - arc[pole]
+            rim, dist, length = r0_r, arc[n - 1] - arc[i], arc[n - 1] - arc[pole]
         length = length if not length < 1e-9 else 1e-9
         lam1 = length / rim
         lam1 = lam1 if not lam1 < 1.0 else 1.0
@@ -525,6 +547,7 @@ class SilhouetteTracer:
         self._check_upright(d, w)
         self._check_flat(d, w)
         self.walls0 = w
+        self._rim0 = (w.axis_col - w.left, w.right - w.axis_col)  # the film's material rim radii (:func:`_thickness`)
         self.polarity = 0  # the dome's sign (+1 darker than the water), from the first frame showing it
         self.shape = frame.shape
         self.ref = self._geometry(w)
@@ -537,7 +560,7 @@ class SilhouetteTracer:
         self._reg_ref = tuple(_Shift1D(p) for p in _profiles(img[slice(*self._reg_rows)]))
         self.prev = None
         self._track = None  # the last ok frames' outer faces (u, z), px (one or two)
-        self._curves = None  # and their final curves (ProfileSpline)
+        self._curves = None  # and their curves with the feet at the rim (ProfileSpline, :meth:`_spline`)
         self._splines = []  # the splines of the track's curves (:meth:`_spline`)
         self.searches = 0  # frames whose outer face was searched for by rays (not tracked)
         self.one_pass = 0  # frames tracked in one pass (:meth:`_one_pass`)
@@ -773,8 +796,8 @@ class SilhouetteTracer:
         return u, z, figs
 
     def _one_pass(self, sample, w, noise, sign):
-        """Outer-face points (u, z) along the normals of the last ok frame's final curve moved on by its last
-        step (stations every ``_STATION_STEP`` px, ``_FOOT_STEP`` near the feet, within ``_NORMAL_REACH`` px,
+        """Outer-face points (u, z) along the normals of the last ok frame's curve (feet at the rim) moved on by its
+        last step (stations every ``_STATION_STEP`` px, ``_FOOT_STEP`` near the feet, within ``_NORMAL_REACH`` px,
         every ``_NORMAL_STEP`` px), or
         None when the prediction is in doubt (an edge near the reach's ends, contrast, jumps or losses); figures.
 
@@ -903,19 +926,30 @@ class SilhouetteTracer:
 
     def _finish(self, u, z, w, g, out):
         rim_l, rim_r = w.axis_col - w.left, w.right - w.axis_col
-        spl = smooth_profile(self._feet(w, u, z), sigma=_FINAL_SIGMA)  # the outer face meets the top face at the rim
-        s, xy = spl.sample(step=1.0)
-        resid = float(np.sqrt(np.nanmean(spl.normal_residuals[1:-1] ** 2)))  # (the points', not the feet's)
-        tang = spl.tangent(s)
+        # the outer face through its points only: the rim is a point of the mid-surface, and the outer face meets
+        # the top face about (l/2) tan(beta/2) outside it (beta: the angle the film leaves the rim at; 3-27 px on
+        # the reference chamber from Vtilde 0.2 to 4); a curve forced through the rim cuts a wedge out of the dome
+        # beside it (-0.1..-0.3 % of the volume there, about 4x that on a chamber of half the radius)
+        # (its scatter: at least _FACE_SIGMA, else the points' own, so a noisy trace is not followed into loops)
+        try:
+            face = smooth_profile(np.column_stack((u, z)), sigma=max(_FACE_SIGMA, _scatter(u, z)))
+        except ValueError as err:  # (fewer than 4 distinct points)
+            out.message = f"too few outer-face points: {err}"
+            out.flag, out.flag_figure, out.flag_value = "poor_fit", "edge_lost", out.figures.get("edge_lost", np.nan)
+            return out
+        s, xy = face.sample(step=1.0)
+        resid = float(np.sqrt(np.nanmean(face.normal_residuals**2)))
+        tang = face.tangent(s)
         normal = np.column_stack((-tang[:, 1], tang[:, 0]))  # outward for a curve left rim -> over the top -> right rim
         l0, rim = self.l0, 0.5 * (rim_l + rim_r)
-        # the film's thickness along the curve: uniform first, then from the kinematics of the last mid-surface
+        # the film's thickness along the curve: uniform first, then from the kinematics of the last mid-surface,
+        # which is bridged from its last point to the rim; the film over the well is the first frame's (the rim's
+        # widening, lambda_pre, stretches it and adds none)
         lthick = np.full(len(xy), l0)
         for _ in range(3):
             mid = xy - 0.5 * lthick[:, None] * normal
             mu, mz = mid[:, 0], mid[:, 1] + 0.5 * l0
-            # (on the curve from rim to rim: the outer face's feet offset inwards lie inside the rim)
-            lthick = _thickness(_ends(-rim_l, mu, rim_r), _ends(0.0, np.maximum(mz, 0.0), 0.0), rim_l, rim_r,
+            lthick = _thickness(_ends(-rim_l, mu, rim_r), _ends(0.0, np.maximum(mz, 0.0), 0.0), *self._rim0,
                                 l0)[1:-1]
         try:  # (the third mid-surface's)
             m = revolution_measures(_ends(-rim_l, mu[mz > 0], rim_r), _ends(0.0, mz[mz > 0], 0.0))
@@ -940,9 +974,10 @@ class SilhouetteTracer:
         if out.flag == "ok":
             self.prev = out
             # (the next frame's outer face is searched along the normals of this one's, moved on by as much as it
-            # moved since the last)
+            # moved since the last: the curve with its feet at the rim, as the stations run from rim to rim)
+            track = self._spline(w, u, z, _TRACK_SIGMA)
             self._track = ((self._track[-1],) if self._track else ()) + ((u, z),)
-            self._curves = ((self._curves[-1],) if self._curves else ()) + (spl,)
+            self._curves = ((self._curves[-1],) if self._curves else ()) + (track,)
         else:
             self._track = self._curves = None
         return out

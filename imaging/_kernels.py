@@ -41,7 +41,8 @@ __all__ = ["sample_transects", "change_transects", "outer_edges", "ends_noise", 
            "rim_zone", "rim_guide", "masked_nanmedian", "abs_percentile", "extrapolated_curve", "rim_contact",
            "curve_extent", "clear_of_curve",
            "ellipse_scatter", "conic_parameters", "direct_ellipse", "ellipse_arc_volume", "profile_ellipse",
-           "arc_resample", "dusty_rows", "wall_rows", "locate_walls", "ridge_rows", "block_mean", "signed_profiles",
+           "arc_resample", "cubic_arc_table", "spline_points", "dusty_rows", "wall_rows", "locate_walls",
+           "ridge_rows", "block_mean", "signed_profiles",
            "compiled_on_disk"]
 
 
@@ -144,10 +145,15 @@ def _sample_transects(frame, k, px, py, dx, dy, offsets, out):
 
 
 def native_frame(frame):
-    """The frame as the kernels take it: C-contiguous, native byte order, not bool (no copy when it already is)."""
+    """The frame as the kernels take it: C-contiguous, native byte order, not bool or half floats (no copy when it
+    already is); a complex frame is refused."""
     frame = np.ascontiguousarray(frame)
     if frame.dtype == np.bool_:
         return frame.astype(np.uint8)
+    if frame.dtype.kind == "c":
+        raise TypeError(f"frame of complex dtype {frame.dtype}: an image is real")
+    if frame.dtype == np.float16:
+        return frame.astype(np.float32)
     if not frame.dtype.isnative:  # big-endian files (ImageJ's default TIFF byte order)
         return frame.astype(frame.dtype.newbyteorder("="))
     return frame
@@ -1149,6 +1155,46 @@ def _bspl_eval(t, c, k, x, out):
 
 
 @njit(cache=True, nogil=True)
+def cubic_arc_table(t, c):
+    """Parameter and arc length of a cubic spline curve of 2-D points (knots ``t`` on [0, 1], coefficients ``c``
+    of shape (n, 2), n = len(t) - 4) at ``min(max(8 (len(t) - 7), 1025), 4001)`` even steps of the parameter (8 per
+    knot span): the trapezoid rule on the speed of its derivative spline (degree 2, knots ``t[1:-1]``)."""
+    nc = c.shape[0]
+    dc = np.empty((nc - 1, 2))
+    for i in range(nc - 1):
+        h = t[i + 4] - t[i + 1]
+        for d in range(2):
+            dc[i, d] = 3.0 * (c[i + 1, d] - c[i, d]) / h if h > 0.0 else 0.0
+    nt = min(max(8 * (t.shape[0] - 7), 1025), 4001)
+    uu = np.linspace(0.0, 1.0, nt)
+    der = np.empty((nt, 2))
+    _bspl_eval(t[1:-1], dc, 2, uu, der)
+    ss = np.empty(nt)
+    ss[0] = 0.0
+    sp_prev = np.hypot(der[0, 0], der[0, 1])
+    for i in range(1, nt):
+        sp = np.hypot(der[i, 0], der[i, 1])
+        ss[i] = ss[i - 1] + 0.5 * (sp + sp_prev) * (uu[i] - uu[i - 1])
+        sp_prev = sp
+    return uu, ss
+
+
+def spline_points(t, c, k, u):
+    """``BSpline(t, c, k)(u)`` of a spline of points (``c`` of shape (n, D) or with FITPACK's trailing zeros, n =
+    len(t) - k - 1) at finite parameters ``u`` in its base interval (any order), shape (len(u), D): the compiled
+    de Boor evaluation of :func:`_bspl_eval`, scipy's values within rounding, without scipy's per-call work."""
+    n = len(t) - k - 1
+    if np.asarray(c).shape[0] < n:
+        raise ValueError(f"a spline of {len(t)} knots and degree {k} has {n} coefficients, got "
+                         f"{np.asarray(c).shape[0]}")
+    c = np.ascontiguousarray(np.asarray(c)[:n], np.float64)
+    u = np.ascontiguousarray(u, np.float64)
+    out = np.empty((u.shape[0], c.shape[1]))
+    _bspl_eval(np.ascontiguousarray(t, np.float64), c, int(k), u, out)
+    return out
+
+
+@njit(cache=True, nogil=True)
 def _quantile_knots(u, sel, spacing, chord, lo, hi):
     """Cubic knots on [lo, hi], interior ones at quantiles of u[sel] without its ends (``_lsq``'s rule)."""
     idx = np.flatnonzero(sel)
@@ -1299,24 +1345,8 @@ def robust_profile_spline(U, Z, ks, pinned, step):
     resid = np.full(n, np.nan)
     for j in range(m):
         resid[idx[j]] = np.hypot(pf[j, 0] - p[j, 0], pf[j, 1] - p[j, 1])
-    # arc-length table: trapezoid rule on the speed of the derivative spline (degree 2, knots t[1:-1])
-    nc = c.shape[0]
-    dc = np.empty((nc - 1, 2))
-    for i in range(nc - 1):
-        h = t[i + 4] - t[i + 1]
-        for d in range(2):
-            dc[i, d] = 3.0 * (c[i + 1, d] - c[i, d]) / h if h > 0.0 else 0.0
-    nt = min(max(8 * (t.shape[0] - 7), 1025), 4001)
-    uu = np.linspace(0.0, 1.0, nt)
-    der = np.empty((nt, 2))
-    _bspl_eval(t[1:-1], dc, 2, uu, der)
-    ss = np.empty(nt)
-    ss[0] = 0.0
-    sp_prev = np.hypot(der[0, 0], der[0, 1])
-    for i in range(1, nt):
-        sp = np.hypot(der[i, 0], der[i, 1])
-        ss[i] = ss[i - 1] + 0.5 * (sp + sp_prev) * (uu[i] - uu[i - 1])
-        sp_prev = sp
+    uu, ss = cubic_arc_table(t, c)
+    nt = uu.shape[0]
     # the curve every `step` px of arc length (ProfileSpline.sample(step))
     length = ss[nt - 1]
     ns = max(int(np.ceil(length / step)) + 1, 2)

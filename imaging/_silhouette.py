@@ -29,7 +29,7 @@ from numba import njit
 from scipy import ndimage
 
 from osmobulge.imaging._chamber import ChamberNotFound
-from osmobulge.imaging._kernels import _lerp, _rank
+from osmobulge.imaging._kernels import _lerp, _masked_line, _rank
 
 __all__ = ["FlatMaps", "SilhouetteWalls", "find_walls"]
 
@@ -328,26 +328,6 @@ def _fit_walls(sd, peaks, r0, r1, top_row, base_row):
 
 
 @njit(cache=True, nogil=True)
-def _line_at(x, y, keep, at):
-    """The least-squares line through the points ``(x, y)`` in ``keep`` (``np.polyfit(x[keep], y[keep], 1)``,
-    by its centred sums) at ``at``: ``(value, mean x, mean y, slope)``; slope 0 for no spread in x."""
-    m, sx, sy = 0, 0.0, 0.0
-    for i in range(x.size):
-        if keep[i]:
-            m += 1
-            sx += x[i]
-            sy += y[i]
-    xm, ym = sx / max(m, 1), sy / max(m, 1)
-    sxx, sxy = 0.0, 0.0
-    for i in range(x.size):
-        if keep[i]:
-            sxx += (x[i] - xm) * (x[i] - xm)
-            sxy += (x[i] - xm) * (y[i] - ym)
-    slope = sxy / sxx if sxx > 0 else 0.0
-    return ym + slope * (at - xm), xm, ym, slope
-
-
-@njit(cache=True, nogil=True)
 def _clipped_line(x, y, at):
     """:func:`_fit_walls`' line of one wall through the finite ``(x, y)``: the least-squares line, fitted again
     without the points more than ``max(3 std, 0.3)`` px off it (std of the residuals, numpy's ``ddof=0``); its
@@ -357,12 +337,12 @@ def _clipped_line(x, y, at):
     n = int(keep.sum())
     if n < 2:
         return np.nan, np.nan, n
-    _, xm, ym, slope = _line_at(x, y, keep, at)
+    a, b, _ = _masked_line(x, y, keep)  # (the rows are distinct: b is finite)
     r = np.empty(n)
     c = 0
     for i in range(x.size):
         if keep[i]:
-            r[c] = y[i] - (ym + slope * (x[i] - xm))
+            r[c] = y[i] - (a + b * x[i])
             c += 1
     lim = max(3.0 * np.std(r), 0.3)
     c = 0
@@ -370,14 +350,13 @@ def _clipped_line(x, y, at):
         if keep[i]:
             keep[i] = abs(r[c]) <= lim
             c += 1
-    value, xm, ym, slope = _line_at(x, y, keep, at)
-    ss, m = 0.0, 0
+    a, b, m = _masked_line(x, y, keep)
+    ss = 0.0
     for i in range(x.size):
         if keep[i]:
-            d = y[i] - (ym + slope * (x[i] - xm))
+            d = y[i] - (a + b * x[i])
             ss += d * d
-            m += 1
-    return value, np.sqrt(ss / m), n
+    return a + b * at, np.sqrt(ss / m), n
 
 
 # ---------------------------------------------------------------------- compiled inner loops

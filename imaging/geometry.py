@@ -29,11 +29,13 @@ from skimage import measure
 
 from osmobulge.imaging._kernels import (
     conic_parameters,
+    cubic_arc_table,
     direct_ellipse,
     ellipse_distance_folded,
     ellipse_scatter,
     lsq_spline,
     revolution_halves,
+    spline_points,
 )
 
 __all__ = [
@@ -335,13 +337,13 @@ class ProfileSpline:
     def __call__(self, s) -> np.ndarray:
         """Points ``(x, y)`` at arc length(s) ``s`` from the first end, shape (..., 2)."""
         s = np.clip(np.asarray(s, float), 0.0, self.length)
-        return np.moveaxis(np.asarray(self.spline(self._u_of_s(s))), 0, -1)
+        return _at(self.spline, self._u_of_s(s))
 
     def tangent(self, s) -> np.ndarray:
         """Unit tangent vectors at arc length(s) ``s``, shape (..., 2)."""
         s = np.clip(np.asarray(s, float), 0.0, self.length)
         der = self.spline.derivative() if self._derivative is None else self._derivative
-        d = np.moveaxis(np.asarray(der(self._u_of_s(s))), 0, -1)
+        d = _at(der, self._u_of_s(s))
         return d / np.linalg.norm(d, axis=-1, keepdims=True)
 
     def sample(self, step=None, n=None) -> tuple[np.ndarray, np.ndarray]:
@@ -379,14 +381,16 @@ def _derivative(spl):
     return interpolate.BSpline.construct_fast(t[1:-1], dc, k - 1, extrapolate=spl.extrapolate, axis=spl.axis)
 
 
-def _arc_length_table(derivative, n=4001):
-    """Parameter ``u`` and arc length at ``n`` even steps of ``u`` (trapezoids of the speed from the spline's
-    ``derivative``)."""
-    u = np.linspace(0.0, 1.0, n)
-    d = np.asarray(derivative(u))
-    speed = np.hypot(d[0], d[1])
-    s = np.concatenate([[0.0], np.cumsum(0.5 * (speed[1:] + speed[:-1]) * np.diff(u))])
-    return u, s
+def _at(spline, u):
+    """``spline(u)`` of a spline of points (its interpolation axis the last: shape ``u.shape + (D,)``), compiled
+    (:func:`~osmobulge.imaging._kernels.spline_points`; scipy's evaluation when a parameter is not finite or the
+    spline does not extrapolate)."""
+    u = np.asarray(u, float)
+    flat = u.ravel()
+    if (spline.axis != 1 or np.asarray(spline.c).ndim != 2 or spline.extrapolate is not True
+            or not np.all(np.isfinite(flat))):
+        return np.moveaxis(np.asarray(spline(u)), 0, -1)
+    return spline_points(spline.t, spline.c, spline.k, flat).reshape(u.shape + (spline.c.shape[1],))
 
 
 def smooth_profile(points, *, sigma=None, smoothing=None, weights=None, knot_spacing=None) -> ProfileSpline:
@@ -460,13 +464,13 @@ def smooth_profile(points, *, sigma=None, smoothing=None, weights=None, knot_spa
         tck, u = interpolate.splprep(pts_ok.T, u=u, s=float(smoothing), w=ww, k=3, quiet=1)
         spl = interpolate.BSpline.construct_fast(tck[0], np.asarray(tck[1]).T, 3, axis=1)
     der = _derivative(spl)
-    uu, ss = _arc_length_table(der, n=int(np.clip(8 * (len(spl.t) - 7), 1025, 4001)))  # 8 per knot span
+    uu, ss = cubic_arc_table(spl.t, np.ascontiguousarray(spl.c[: len(spl.t) - 4]))  # (8 steps per knot span)
     u_of_s = partial(np.interp, xp=ss, fp=uu)  # arc length -> spline parameter (monotone table)
-    off = pts_ok - np.asarray(spl(u)).T
+    off = pts_ok - _at(spl, u)
     res, nres = np.full(len(pts), np.nan), np.full(len(pts), np.nan)
     idx = np.flatnonzero(ok)[keep]
     res[idx] = np.hypot(*off.T)
-    d = np.asarray(der(u)).T
+    d = _at(der, u)
     nres[idx] = np.abs(off[:, 1] * d[:, 0] - off[:, 0] * d[:, 1]) / np.maximum(np.hypot(*d.T), 1e-300)
     return ProfileSpline(spline=spl, length=float(ss[-1]), residuals=res, normal_residuals=nres, _u_of_s=u_of_s,
                          _derivative=der)

@@ -68,7 +68,7 @@ def test_optics_looks_are_measured_within_the_issues_tolerances(name, edge_dark)
     # the mid-surface's area, with the film's thickness from incompressibility (not in the issue's list)
     np.testing.assert_allclose(ds.area_ratio, s.truth.area_ratio, rtol=0.015)
     # heights within 1 px; on the 26 um film the pole's is the assumed thickness law's (l0 / lambda1^2) error:
-    # measured -1.02 px at Vtilde 0.6 since the renderer's silhouettes are no longer pushed 0.1-0.5 px out
+    # measured -0.98 px at Vtilde 0.6 (the film is thinner at the pole than a uniform meridional stretch makes it)
     tol_h = 1.2 if name == "film_26um" else 1.0
     np.testing.assert_allclose(ds.bulge_height, s.truth.bulge_height, atol=tol_h * s.truth.attrs["pixel_size"])
 
@@ -96,6 +96,81 @@ def test_the_profile_is_the_mid_surface(edge_dark):
     assert np.max(d) < 10.0 * p
     # the film's thickness here is about 10 um: tracing its outer face would put the curve ~ 6 px off
     assert float(t.profile_thickness[i].max()) / p > 6.0
+
+
+def test_the_volume_has_no_bias_from_the_feet_or_the_film(edge_dark):
+    """In focus the volume is unbiased to 0.15 % at Vtilde 0.6 and 2 (measured +0.05 % and -0.08 %).
+
+    The rim is a point of the mid-surface: the outer face meets the top face
+    about (l/2) tan(beta/2) outside it, so an outer-face curve forced through
+    the rim cut a wedge out of the dome there; and the film over the well is
+    the flat frame's, l0 pi R0**2, which the rim's widening (lambda_pre, 2 % at
+    Vtilde 2 here) stretches, not l0 pi R**2.  Together they read -0.31 % and
+    -0.34 % low.
+    """
+    ds = _extract(edge_dark)
+    v, vt = ds.volume.values[2:], edge_dark.truth.volume.values[2:]
+    assert np.all(np.abs(v / vt - 1.0) < 1.5e-3), 100 * (v / vt - 1.0)
+
+
+def test_the_film_thickness_law_conserves_the_flat_frames_film():
+    """_thickness on a spherical-cap mid-surface whose rim has widened from R0 to R = 1.03 R0: the film over the
+    well, integral of l dA, is the flat frame's l0 pi R0**2 (within 1e-4; R in its place: +6 %), its thickness
+    l0 / lambda1**2 at the pole and l0 / (lambda1 lambda_pre) at the rim, lambda1 = L / R0."""
+    from osmobulge.imaging._facetrace import _thickness
+
+    r0, rim, l0 = 150.0, 154.5, 20.0
+    for h in (30.0, 150.0, 260.0):
+        rho = (rim**2 + h**2) / (2.0 * h)  # the cap's sphere
+        half = np.arcsin(rim / rho) if h <= rho else np.pi - np.arcsin(rim / rho)
+        phi = np.linspace(-half, half, 1201)
+        u, z = rho * np.sin(phi), rho * np.cos(phi) - (rho - h)
+        lt = _thickness(u, z, r0, r0, l0)
+        ds = rho * np.diff(phi)
+        mid = 0.5 * (lt[1:] + lt[:-1]) * 2.0 * np.pi * 0.5 * np.abs(u[1:] + u[:-1]) * ds
+        assert 0.5 * mid.sum() == pytest.approx(l0 * np.pi * r0**2, rel=1e-4)  # (each half revolved: halved)
+        # each half its own material radius: each half revolved holds its own film
+        lt = _thickness(u, z, r0, 0.9 * r0, l0)
+        halves = 0.5 * (lt[1:] + lt[:-1]) * 2.0 * np.pi * 0.5 * np.abs(u[1:] + u[:-1]) * ds
+        assert halves[:600].sum() == pytest.approx(l0 * np.pi * r0**2, rel=1e-4)
+        assert halves[600:].sum() == pytest.approx(l0 * np.pi * (0.9 * r0) ** 2, rel=1e-4)
+        lam1 = rho * half / r0
+        assert lt[600] == pytest.approx(l0 / lam1**2, rel=1e-3)
+        assert lt[0] == pytest.approx(l0 / (lam1 * rim / r0), rel=1e-6)  # (L: the polyline's)
+
+
+def test_the_points_scatter_sets_the_faces_smoothing():
+    """_scatter reads the points' scatter across a curve from their second differences: within 15 % of the noise
+    put on points every 3 px on a circle of 200 px (0.05-0.17 px measured on the 21 looks); the face's spline
+    then follows noisy points (0.5 px) without loops: its mid-surface, 12 px inside, never turns back."""
+    from osmobulge.imaging._facetrace import _FACE_SIGMA, _scatter
+    from osmobulge.imaging.geometry import smooth_profile
+
+    rng = np.random.default_rng(8)
+    phi = np.arange(0.05, np.pi - 0.05, 3.0 / 200.0)
+    for sigma in (0.1, 0.3, 0.5):
+        r = 200.0 + rng.normal(0.0, sigma, phi.size)
+        u, z = r * np.cos(phi), r * np.sin(phi)
+        got = _scatter(u, z)
+        assert got == pytest.approx(sigma, rel=0.15)
+        face = smooth_profile(np.column_stack((u, z)), sigma=max(_FACE_SIGMA, got))
+        s, xy = face.sample(step=1.0)
+        t = face.tangent(s)
+        mid = xy - 12.0 * np.column_stack((-t[:, 1], t[:, 0]))
+        step = np.diff(mid, axis=0)
+        assert np.all(np.einsum("ij,ij->i", step, np.diff(xy, axis=0)) > 0)  # (the mid-surface runs on)
+    assert _scatter(np.arange(4.0), np.zeros(4)) == 0.0
+
+
+def test_too_few_outer_face_points_are_a_poor_fit_not_an_error(edge_dark):
+    """A frame whose outer face left fewer than 4 points is flagged poor_fit with the reason, not raised."""
+    tr = SilhouetteTracer(edge_dark.frames[0], **_known(edge_dark))
+    out = tr.process(edge_dark.frames[2], 2)
+    assert out.flag == "ok"
+    w = tr.walls0
+    bad = tr._finish(np.array([-10.0, 0.0, 10.0]), np.array([5.0, 9.0, 5.0]), w, out.geometry,
+                     type(out)(index=3))
+    assert bad.flag == "poor_fit" and "too few outer-face points" in bad.message
 
 
 def test_thickness_and_depth_are_measured_without_the_chamber(edge_dark):

@@ -332,22 +332,6 @@ def test_percentiles_and_medians_are_numpys():
             np.testing.assert_array_equal(got, (floor, np.percentile(np.abs((a - bg) / np.maximum(bg, floor)), q)))
 
 
-def test_wall_line_is_numpys_least_squares_line():
-    """_line_at (the centred sums) reads the same line as np.polyfit(x, y, 1) within 1e-9 px, rows in the
-    hundreds as the walls' are, on the points kept only."""
-    from osmobulge.imaging._silhouette import _line_at
-
-    rng = np.random.default_rng(6)
-    for _ in range(50):
-        x = np.sort(rng.uniform(0.0, 1000.0, int(rng.integers(5, 300))))
-        y = rng.uniform(-500, 500) + rng.normal(0.0, 0.05) * x + rng.normal(0.0, 0.3, x.size)
-        keep = rng.random(x.size) < 0.8
-        keep[:2] = True
-        for at in np.r_[x[:3], rng.uniform(0.0, 1000.0)]:
-            np.testing.assert_allclose(_line_at(x, y, keep, at)[0],
-                                       np.polyval(np.polyfit(x[keep], y[keep], 1), at), rtol=0, atol=1e-9)
-
-
 def test_clipped_wall_line_is_the_numpy_rule():
     """_clipped_line (compiled) gives what the rule says in numpy: the line through the finite points, again
     without those more than max(3 std, 0.3) px off it, read at the base row, with the kept points' rms; an
