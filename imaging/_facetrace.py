@@ -87,9 +87,9 @@ _SEARCH_STEP = 1.0
 #: with its feet at the rim kept for the next frame's one pass (1.0 there: one frame in four fell back to the
 #: two-pass track on a series of coarse steps)
 _FIRST_SIGMA, _TRACK_SIGMA = 1.0, 0.5
-#: and at least that of the outer face measured (its points scatter 0.05-0.15 px about it on the looks: 0.5 let a
-#: curve of few knots lie 0.3-0.6 px off a dome's pole at 2 um/px, the smoothing spline's bias where it bends most;
-#: noisier points set their own, their scaled MAD about the stiffer curve)
+#: and at least that of the outer face measured (its points scatter 0.05-0.17 px across it on the 21 looks,
+#: :func:`_scatter`: 0.5 let a curve of few knots lie 0.3-0.6 px off a dome's pole at 2 um/px, the smoothing
+#: spline's bias where it bends most; noisier points set their own, :func:`_scatter`)
 _FACE_SIGMA = 0.25
 #: an edge further than this (px) from the running median of its neighbours' is a jump
 _JUMP_PX = 3.0
@@ -432,7 +432,8 @@ def _thickness(u, z, r0_l, r0_r, l0):
     :math:`R_0` at the rim to 0 at the pole, :math:`R_0` (``r0_l``, ``r0_r``)
     the rim radius in the flat first frame, whose film is :math:`l_0` thick
     (the rim's later widening, the pre-stretch, stretches that film and adds
-    none).  So :math:`\lambda_1 = L/R_0` (half the curve's arc length over
+    none; :math:`\lambda_{pre} = R/R_0`, supplement Sec. 5.7).  So
+    :math:`\lambda_1 = L/R_0` (half the curve's arc length over
     it), :math:`\lambda_2 = r/(R_0 (1 - s/L))` and :math:`l = l_0/(\lambda_1
     \lambda_2)`: :math:`l_0/\lambda_1^2` at the pole, :math:`l_0/(\lambda_1
     \lambda_{pre})` at the rim.  Whatever the law, :math:`\int l\,dA = l_0
@@ -951,14 +952,14 @@ class SilhouetteTracer:
             mu, mz = mid[:, 0], mid[:, 1] + 0.5 * l0
             lthick = _thickness(_ends(-rim_l, mu, rim_r), _ends(0.0, np.maximum(mz, 0.0), 0.0), *self._rim0,
                                 l0)[1:-1]
-        try:  # (the third mid-surface's)
-            m = revolution_measures(_ends(-rim_l, mu[mz > 0], rim_r), _ends(0.0, mz[mz > 0], 0.0))
+        keep = mz > 0.0  # (the third mid-surface above the rim plane, from rim to rim)
+        mu, mz = _ends(-rim_l, mu[keep], rim_r), _ends(0.0, mz[keep], 0.0)
+        try:
+            m = revolution_measures(mu, mz)
         except ValueError as err:
             out.message = str(err)
             out.flag, out.flag_figure, out.flag_value = "poor_fit", "residual_rms", float(resid)
             return out
-        keep = mz > 0.0
-        mu, mz = _ends(-rim_l, mu[keep], rim_r), _ends(0.0, mz[keep], 0.0)
         out.u, out.z = mu, mz
         out.points_u, out.points_z = u, z + 0.5 * l0
         out.residual_rms = float(resid)

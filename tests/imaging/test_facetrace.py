@@ -99,7 +99,7 @@ def test_the_profile_is_the_mid_surface(edge_dark):
 
 
 def test_the_volume_has_no_bias_from_the_feet_or_the_film(edge_dark):
-    """In focus the volume is unbiased to 0.15 % at Vtilde 0.6 and 2 (measured +0.05 % and -0.08 %).
+    """In focus the volume is unbiased to 0.15 % at Vtilde 0.6 and 2 (measured -0.01 % and -0.06 %).
 
     The rim is a point of the mid-surface: the outer face meets the top face
     about (l/2) tan(beta/2) outside it, so an outer-face curve forced through
