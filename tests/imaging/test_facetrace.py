@@ -564,6 +564,30 @@ def test_stations_are_denser_at_the_feet():
     assert shares.sum() == pytest.approx(s[-1] - s[0] + 0.5 * (d[0] + d[-1]))
 
 
+def test_the_tracks_curve_is_the_face_sampled_by_arc_length():
+    """_Polyline (the one-pass track's curve): through a half circle of 300 px sampled every px between two feet
+    it is the circle by arc length (points within 5e-4 px of it, the length within 1e-5 of pi R), its tangents
+    the circle's within half a segment's turn (0.5/R rad); a repeated point adds no segment; arcs outside
+    [0, length] are its ends."""
+    from osmobulge.imaging._facetrace import _Polyline
+
+    R = 300.0
+    phi = np.linspace(np.pi, 0.0, int(np.pi * R) + 1)  # (left foot -> over the top -> right foot, ~1 px apart)
+    xy = np.column_stack((R * np.cos(phi), R * np.sin(phi)))
+    line = _Polyline(np.vstack((xy[:1], xy)))  # (the first point twice)
+    assert line.length == pytest.approx(np.pi * R, rel=1e-5)
+    s = np.random.default_rng(3).uniform(0.0, line.length, 500)
+    p = line(s)
+    np.testing.assert_allclose(np.hypot(p[:, 0], p[:, 1]), R, atol=5e-4)
+    ang = np.pi - s / R  # (where the circle is at that arc)
+    np.testing.assert_allclose(p, np.column_stack((R * np.cos(ang), R * np.sin(ang))), atol=2e-3)
+    t = line.tangent(s)
+    want = np.column_stack((np.sin(ang), -np.cos(ang)))  # (d/ds of the point: clockwise)
+    assert np.max(np.abs(np.einsum("ij,ij->i", t, want) - 1.0)) < 0.5 / R**2  # (1 - cos(0.5 / R) = 1.4e-6)
+    np.testing.assert_allclose(line([-5.0, line.length + 5.0]), xy[[0, -1]])
+    np.testing.assert_allclose(line.tangent([-5.0, line.length + 5.0]), line.dirs[[0, -1]])
+
+
 def test_the_noise_is_the_changes_spread_over_the_water(edge_dark):
     """The noise figure (12 rows, a sample every px, every other row half a px on) against the scaled MAD of the
     same change on 64 rows sampled every 0.5 px: within 8 % (on the 21 looks at 9 frames: -4..+8 %), and against
