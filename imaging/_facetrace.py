@@ -470,12 +470,21 @@ def _thickness(u, z, r0_l, r0_r, l0):
     return out
 
 
+def _foot(p, t, most=40.0):
+    """Where the outer face's end ``p`` carried on along ``t`` (unit, away from the face) meets the top face
+    (z = 0), at most ``most`` px on; (0, 2) points (none when it does not come down)."""
+    if t[1] >= -1e-3:
+        return np.zeros((0, 2))
+    return (p + min(p[1] / -t[1], most) * t)[None, :]
+
+
 class _Polyline:
     """A curve through ordered points ``xy`` (N, 2), by arc length: its points by linear interpolation, its tangent
     that of the segment there.  The track's curve (:meth:`SilhouetteTracer._finish`): the outer face's spline
-    sampled every px, between its feet at the rim (linear between 1 px samples of a curve of radius 300 px: 4e-4 px
-    off it); what :meth:`SilhouetteTracer._normals` takes of a :class:`ProfileSpline` (``length``, the points and
-    the tangents), without a second spline fitted each frame."""
+    sampled every px (linear between 1 px samples of a curve of radius 300 px: 4e-4 px off it), with its ends
+    carried down to the top face (:func:`_foot`) and on to the feet at the rim; what
+    :meth:`SilhouetteTracer._normals` takes of a :class:`ProfileSpline` (``length``, the points and the tangents),
+    without a second spline fitted each frame."""
 
     def __init__(self, xy):
         xy = np.asarray(xy, float)
@@ -1003,10 +1012,14 @@ class SilhouetteTracer:
         if out.flag == "ok":
             self.prev = out
             # (the next frame's outer face is searched along the normals of this one's, moved on by as much as it
-            # moved since the last: the curve with its feet at the rim, as the stations run from rim to rim; this
-            # frame's outer face sampled every px, not a second spline fitted with the feet: the same flags and
-            # one-pass tracks on the looks, a tracked frame 0.7 ms faster)
-            track = _Polyline(np.vstack(([-rim_l, 0.0], xy, [rim_r, 0.0])))
+            # moved since the last: the curve with its feet at the rim, as the stations run from rim to rim): this
+            # frame's outer face sampled every px, its ends carried on down to the top face, then along it to the
+            # rim (not a second spline fitted with the feet: a tracked frame 0.6 ms faster; the same flags and
+            # volumes within 0.002 of the tolerance on the looks; straight from the face's ends to the rim
+            # instead, the feet's stations' normals point into the base, the face's lowest points crept up
+            # frame by frame, 4.5 -> 8 px, and the small chamber's volume read up to 0.09 % lower)
+            track = _Polyline(np.vstack(([-rim_l, 0.0], _foot(xy[0], -tang[0]), xy, _foot(xy[-1], tang[-1]),
+                                         [rim_r, 0.0])))
             self._track = ((self._track[-1],) if self._track else ()) + ((u, z),)
             self._curves = ((self._curves[-1],) if self._curves else ()) + (track,)
         else:

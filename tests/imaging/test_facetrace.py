@@ -588,6 +588,18 @@ def test_the_tracks_curve_is_the_face_sampled_by_arc_length():
     np.testing.assert_allclose(line.tangent([-5.0, line.length + 5.0]), line.dirs[[0, -1]])
 
 
+def test_the_tracks_feet_carry_the_face_down_to_the_top_face():
+    """_foot: a face's end 4 px up going on outwards-down (0.6, -0.8) meets the top face 5 px on, at (103, 0); a
+    shallow end is carried at most 40 px; an end that does not come down (level or rising) adds no point."""
+    from osmobulge.imaging._facetrace import _foot
+
+    np.testing.assert_allclose(_foot(np.array([100.0, 4.0]), np.array([0.6, -0.8])), [[103.0, 0.0]])
+    t = np.array([np.cos(0.01), -np.sin(0.01)])
+    np.testing.assert_allclose(_foot(np.array([100.0, 4.0]), t), [[100.0 + 40.0 * t[0], 4.0 + 40.0 * t[1]]])
+    assert _foot(np.array([100.0, 4.0]), np.array([1.0, 0.0])).shape == (0, 2)
+    assert _foot(np.array([100.0, 4.0]), np.array([0.6, 0.8])).shape == (0, 2)
+
+
 def test_the_noise_is_the_changes_spread_over_the_water(edge_dark):
     """The noise figure (12 rows, a sample every px, every other row half a px on) against the scaled MAD of the
     same change on 64 rows sampled every 0.5 px: within 8 % (on the 21 looks at 9 frames: -4..+8 %), and against
