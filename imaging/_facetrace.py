@@ -472,8 +472,8 @@ def _thickness(u, z, r0_l, r0_r, l0):
 
 def _foot(p, t, most=40.0):
     """Where the outer face's end ``p`` carried on along ``t`` (unit, away from the face) meets the top face
-    (z = 0), at most ``most`` px on; (0, 2) points (none when it does not come down)."""
-    if t[1] >= -1e-3:
+    (z = 0), at most ``most`` px on; (0, 2) points (none when it does not come down, or is down already)."""
+    if t[1] >= -1e-3 or p[1] <= 0.0:
         return np.zeros((0, 2))
     return (p + min(p[1] / -t[1], most) * t)[None, :]
 

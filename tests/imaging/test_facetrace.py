@@ -590,7 +590,8 @@ def test_the_tracks_curve_is_the_face_sampled_by_arc_length():
 
 def test_the_tracks_feet_carry_the_face_down_to_the_top_face():
     """_foot: a face's end 4 px up going on outwards-down (0.6, -0.8) meets the top face 5 px on, at (103, 0); a
-    shallow end is carried at most 40 px; an end that does not come down (level or rising) adds no point."""
+    shallow end is carried at most 40 px; an end that does not come down (level or rising), or is at the top
+    face already, adds no point."""
     from osmobulge.imaging._facetrace import _foot
 
     np.testing.assert_allclose(_foot(np.array([100.0, 4.0]), np.array([0.6, -0.8])), [[103.0, 0.0]])
@@ -598,6 +599,7 @@ def test_the_tracks_feet_carry_the_face_down_to_the_top_face():
     np.testing.assert_allclose(_foot(np.array([100.0, 4.0]), t), [[100.0 + 40.0 * t[0], 4.0 + 40.0 * t[1]]])
     assert _foot(np.array([100.0, 4.0]), np.array([1.0, 0.0])).shape == (0, 2)
     assert _foot(np.array([100.0, 4.0]), np.array([0.6, 0.8])).shape == (0, 2)
+    assert _foot(np.array([100.0, -0.5]), np.array([0.6, -0.8])).shape == (0, 2)  # (an end at the top face)
 
 
 def test_the_noise_is_the_changes_spread_over_the_water(edge_dark):
