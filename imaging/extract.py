@@ -236,9 +236,11 @@ def extract(
         the film's thickness inside it; one upright chamber (no
         ``chamber_region``), thickness from ``chamber`` or measured from the
         flat film's two faces.  ``"auto"``: the band route, and the
-        silhouette route when the band route finds no chamber or cannot read
-        its own (flat) first frame.  The route
-        taken is the ``tracer`` attr.
+        silhouette route when the band route finds no chamber, cannot read
+        its own (flat) first frame, or (with ``chamber`` given) finds a rim
+        more than ``ROUTE_RIM_TOL`` (10 %) off the chamber's radius while the
+        silhouette route's is within it (a lightly dyed film's band is not
+        the well).  The route taken is the ``tracer`` attr.
     rim : array_like of shape (2, 2), optional
         The chamber's rim in the flat (first or reference) frame when the
         automatic search fails: the flat membrane's mid-line ends at the two
@@ -510,21 +512,28 @@ def _tracers(first, bulge_direction, chamber_region, settings, route="band", cha
                 raise ChamberNotFound(f"{err}; and by the walls' and film's silhouettes: {err2}") from err2
         if route == "auto" and chamber_region is None:
             # a band found in a look it does not fit (measured: an inverted bright-field film) does not read
-            # its own flat frame; the silhouette route then, when it finds the chamber
+            # its own flat frame; the silhouette route then, when it finds the chamber.  Nor is a band whose rim
+            # lies more than ROUTE_RIM_TOL off the given chamber's radius this chamber's (measured: a lightly dyed
+            # film, ho_dyed_film, a band 88 px wide of rim over a well of 160 px, read flat in every frame while
+            # the dome rose, flagged ok): the silhouette route then, when its rim (the well's walls) is within it
             import copy
 
             own = copy.deepcopy(band).process(first, 0)
-            if own.flag != "ok":
+            off = _rim_off(band.ref.rim_radius, chamber, p)
+            if own.flag != "ok" or off > ROUTE_RIM_TOL:
                 try:
-                    return [_silhouette_tracer(first, bulge_direction, settings, chamber, p)]
+                    sil = _silhouette_tracer(first, bulge_direction, settings, chamber, p)
                 except ChamberNotFound as err:  # the band route it is: its frames are flagged (and a bulged
                     # frame the chamber was found in is warned about below); not on a dark background, which
                     # neither route reads unless asked (a band found there does not read its own flat frame)
                     from osmobulge.imaging._facetrace import dark_background
 
-                    if dark_background(first)[1]:
+                    if own.flag != "ok" and dark_background(first)[1]:
                         raise ChamberNotFound(f"the band route cannot read its own first frame ({own.flag}), "
                                               f"and {err}") from err
+                else:
+                    if own.flag != "ok" or _rim_off(sil.ref.rim_radius, chamber, p) <= ROUTE_RIM_TOL:
+                        return [sil]
         return [band]
     central = ChamberTracer(first, bulge_direction=bulge_direction, settings=settings)
     g = central.ref
@@ -548,6 +557,18 @@ def _tracers(first, bulge_direction, chamber_region, settings, route="band", cha
 #: relative difference between the flat frame's measured rim radius and the chamber's radius a above which
 #: extract warns (Vtilde uses a, lambda_pre the measured radius)
 RIM_MISMATCH = 0.02
+#: relative difference between a route's rim radius in the flat frame and the given chamber's radius a above which
+#: the route has found something else than this chamber's well (``tracer="auto"``: the band route's rim is checked,
+#: the silhouette route's taken when it is within this; the silhouette route's rims lie within 0.3 px of the
+#: truth on every look, 0.2 % at 160 px; a well made 10 % off its drawing is not this chamber)
+ROUTE_RIM_TOL = 0.10
+
+
+def _rim_off(rim_px, chamber, p):
+    """How far (relative) a rim radius of ``rim_px`` px lies off the chamber's radius (0 without a chamber)."""
+    if chamber is None or p is None or not np.isfinite(rim_px):
+        return 0.0 if chamber is None or p is None else np.inf
+    return abs(float(rim_px) * float(p) / float(chamber.radius) - 1.0)
 #: first-frame dome height, as a fraction of the rim radius, above which extract warns (the first frame
 #: must show the flat membrane; a first frame at Vtilde 0.05, height 0.1 a, still measures within 0.2 %)
 FIRST_FRAME_HEIGHT = 0.2

@@ -99,6 +99,19 @@ HELD_OUT_LOOKS: dict[str, Look] = {
                 drift_sigma=0.5, dust_count=6),
         chamber=(170e-6, 110e-6, 21e-6), pixel_size=1.0e-6, seed=42,
     ),
+    # added 2026-12-06, measured once blind as ho_blind_1206 (25 frames, Vtilde 0..4): a lightly dyed film (a
+    # flat band, a dome of thin lines), 1.25 um/px, 10 bits, strong vignetting; tracer="auto" took the band route
+    # (its band's rim 88 px over a well of 160 px, its own flat frame read ok) and read every frame flat: 20 of
+    # 25 frames flagged ok and wrong (worst volume error 33x the tolerance); the silhouette route forced: 0
+    # flagged, 0 silent, worst 0.55.  The route's rim check against the chamber (extract.ROUTE_RIM_TOL) followed;
+    # no longer blind
+    "ho_dyed_film": Look(
+        Optics(n_elastomer=1.408, n_liquid=1.348, objective_na=0.2, condenser_na=0.25, defocus=3e-6,
+               absorption_film=3e3, halo_strength=0.5, halo_width=3.5e-6),
+        replace(_N, noise_sigma=0.01, poisson_photons=5000.0, blur_sigma=0.6, drift_sigma=0.2, vignetting=0.25,
+                illumination_gradient=0.2, illumination_angle=-20.0, bit_depth=10),
+        chamber=(200e-6, 110e-6, 26e-6), pixel_size=1.25e-6, seed=61,
+    ),
 }
 
 

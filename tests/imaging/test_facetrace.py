@@ -249,6 +249,27 @@ def test_band_looks_keep_the_band_route_and_silhouette_can_be_forced():
         _extract(s, tracer="silhouette", chamber_region=(100, 200))
 
 
+def test_a_band_off_the_chambers_rim_is_not_this_chamber():
+    """ho_dyed_film (a lightly dyed film: a flat band, a dome of thin lines): the band route finds a band whose rim
+    lies 45 % inside the well's (88 px against 160) and reads its own flat frame ok; measured blind, auto kept it
+    and read every frame flat, flagged ok.  With the chamber given, auto checks the band's rim against its radius
+    (ROUTE_RIM_TOL) and takes the silhouette route, whose rim is the well's: every frame ok and within the
+    tolerances.  (Without a chamber there is no radius to check it against: the band is kept, as before.)"""
+    from osmobulge.imaging.extract import ROUTE_RIM_TOL
+    from osmobulge.imaging.trace import ChamberTracer
+
+    s = render_look("ho_dyed_film", [0.0, 0.6, 2.0], lambda_pre=PRE)
+    p, true_rim = s.truth.attrs["pixel_size"], s.truth.rim_radius.values[0]
+    band = ChamberTracer(s.frames[0])
+    assert band.process(s.frames[0], 0).flag == "ok"  # (so the own-flat-frame check does not catch it)
+    assert abs(band.ref.rim_radius * p / true_rim - 1.0) > 2 * ROUTE_RIM_TOL
+    ds = _extract(s)
+    sc = score(s.truth, ds)
+    assert ds.attrs["tracer"] == "silhouette"
+    assert list(ds.flag.values) == ["ok"] * 3 and sc["n_silent"] == 0 and sc["worst_dv_tol"] <= 1.0
+    assert np.all(np.abs(sc["rim_bias_px"]) <= 0.5)
+
+
 def test_dark_field_is_refused_not_measured():
     s = render_look("dark_field", [0.0, 0.6], shape=(700, 900))
     ratio, why = dark_background(s.frames[0])
