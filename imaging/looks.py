@@ -112,6 +112,16 @@ HELD_OUT_LOOKS: dict[str, Look] = {
                 illumination_gradient=0.2, illumination_angle=-20.0, bit_depth=10),
         chamber=(200e-6, 110e-6, 26e-6), pixel_size=1.25e-6, seed=61,
     ),
+    # added 2026-12-06 after that route check: another dyed film (lighter), inverted display, 12 bits, dust,
+    # drift; measured once, blind (25 frames, Vtilde 0..4: the silhouette route, 0 flagged, 0 silent, worst
+    # volume error 0.77 of the tolerance at Vtilde 0.17, rim within 0.30 px, lambda_pre within 0.13 %)
+    "ho_blind_1206b": Look(
+        Optics(n_elastomer=1.43, n_liquid=1.34, objective_na=0.35, condenser_na=0.2, defocus=-6e-6,
+               absorption_film=1e3, halo_strength=0.2, halo_width=3e-6),
+        replace(_N, polarity=-1, noise_sigma=0.015, blur_sigma=0.7, drift_sigma=0.4, vignetting=0.2,
+                illumination_gradient=0.1, illumination_angle=60.0, dust_count=4, bit_depth=12),
+        chamber=(140e-6, 110e-6, 23e-6), pixel_size=0.9e-6, seed=62,
+    ),
 }
 
 
