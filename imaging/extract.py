@@ -395,6 +395,9 @@ def extract(
 
     for run in runs:
         series_gates(run.scal, run.flag, run.flag_figure, p, flat_first=ref_frame is None)
+    if tracer == "auto" and chamber is None:
+        for c, run in enumerate(runs):
+            _warn_if_band_stays_flat(run, p, f"chamber {c}: " if len(runs) > 1 else "")
     parts = [_dataset(r, times, p, chamber_attrs, src, settings, bulge_direction, chamber_region, errors, metadata,
                       fit_prestretch) for r in runs]
     for ds in parts:
@@ -593,6 +596,27 @@ def _warn_if_bulged(height, rim_radius, which, where, hint=""):
                       f"rim radius) above the flat membrane; the chamber is found in the {which}, which must show "
                       f"the flat membrane: rim radius, volumes and lambda_pre may be wrong{hint}", UserWarning,
                       stacklevel=3)
+
+
+#: largest dome (px above the flat membrane) over a series' later ok frames below which an unchecked band route
+#: (``tracer="auto"`` without a chamber) warns that its band may not be the membrane
+FLAT_SERIES_PX = 1.0
+
+
+def _warn_if_band_stays_flat(run, p, where):
+    """Warn when the band route, taken without a chamber to check its rim against (:data:`ROUTE_RIM_TOL`), reads
+    every later ok frame (two at least) within FLAT_SERIES_PX of the flat membrane: a band that is not the
+    membrane reads so (measured: a lightly dyed film's flat band, 0.02 px while the dome stood 200 px)."""
+    if not isinstance(run.tracer, ChamberTracer):
+        return
+    later = np.array([f == "ok" for f in run.flag])
+    later[:1] = False
+    height = run.scal["bulge_height"][later] / p
+    if later.sum() >= 2 and np.all(np.abs(height) < FLAT_SERIES_PX):
+        warnings.warn(f"{where}the band route read no dome in any of {int(later.sum())} later frames flagged ok (all "
+                      f"within {FLAT_SERIES_PX:.0f} px of the flat membrane): if a dome is seen, the band followed is "
+                      f"not the membrane (a lightly dyed film's flat band reads so); pass the chamber (auto then "
+                      f"checks the band's rim against its radius) or tracer='silhouette'", UserWarning, stacklevel=3)
 
 
 class _Run:

@@ -254,7 +254,7 @@ def test_a_band_off_the_chambers_rim_is_not_this_chamber():
     lies 45 % inside the well's (88 px against 160) and reads its own flat frame ok; measured blind, auto kept it
     and read every frame flat, flagged ok.  With the chamber given, auto checks the band's rim against its radius
     (ROUTE_RIM_TOL) and takes the silhouette route, whose rim is the well's: every frame ok and within the
-    tolerances.  (Without a chamber there is no radius to check it against: the band is kept, as before.)"""
+    tolerances.  Without a chamber the band is kept and its flat reading warned about."""
     from osmobulge.imaging.extract import ROUTE_RIM_TOL
     from osmobulge.imaging.trace import ChamberTracer
 
@@ -268,6 +268,11 @@ def test_a_band_off_the_chambers_rim_is_not_this_chamber():
     assert ds.attrs["tracer"] == "silhouette"
     assert list(ds.flag.values) == ["ok"] * 3 and sc["n_silent"] == 0 and sc["worst_dv_tol"] <= 1.0
     assert np.all(np.abs(sc["rim_bias_px"]) <= 0.5)
+    # without a chamber there is no radius to check the band against: the band is kept, and its flat reading of
+    # every later frame is warned about, not passed in silence
+    with pytest.warns(UserWarning, match="the band route read no dome"):
+        free = extract(s.frames, pixel_size=p, progress=False, frame_interval=600.0)
+    assert free.attrs["tracer"] == "band"
 
 
 def test_dark_field_is_refused_not_measured():
