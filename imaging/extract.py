@@ -572,6 +572,8 @@ def _rim_off(rim_px, chamber, p):
     if chamber is None or p is None or not np.isfinite(rim_px):
         return 0.0 if chamber is None or p is None else np.inf
     return abs(float(rim_px) * float(p) / float(chamber.radius) - 1.0)
+
+
 #: first-frame dome height, as a fraction of the rim radius, above which extract warns (the first frame
 #: must show the flat membrane; a first frame at Vtilde 0.05, height 0.1 a, still measures within 0.2 %)
 FIRST_FRAME_HEIGHT = 0.2
@@ -606,7 +608,7 @@ FLAT_SERIES_PX = 1.0
 def _warn_if_band_stays_flat(run, p, where):
     """Warn when the band route, taken without a chamber to check its rim against (:data:`ROUTE_RIM_TOL`), reads
     every later ok frame (two at least) within FLAT_SERIES_PX of the flat membrane: a band that is not the
-    membrane reads so (measured: a lightly dyed film's flat band, 0.02 px while the dome stood 200 px)."""
+    membrane reads so (measured: a lightly dyed film's flat band, 0.02 px while the dome stood 150-270 px)."""
     if not isinstance(run.tracer, ChamberTracer):
         return
     later = np.array([f == "ok" for f in run.flag])
