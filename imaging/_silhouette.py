@@ -199,7 +199,7 @@ def find_walls(frame, l0_px, *, strip=(0.15, 0.6), depth_px=None, min_width=40, 
                 raise ChamberNotFound(f"no wall silhouette within {half} px of column {c:.0f}")
             peaks.append(c0 + int(np.argmax(col_score[c0:c1])))
     else:
-        peaks = _strongest(col_score, img.shape[1], min_width)
+        peaks = _wall_pair(col_score, img.shape[1], min_width)
     return _fit_walls(sd, peaks, r0, r1, top_row, base_row)
 
 
@@ -283,8 +283,8 @@ def _top_face(d, l0_px, img=None, near=None, scores=None):
     return float(top_row)
 
 
-def _strongest(col_score, width, min_width):
-    """The two strongest silhouette columns at least ``min_width`` apart."""
+def _strongest(col_score, width, min_width, most=2):
+    """The ``most`` strongest silhouette columns at least ``min_width`` apart, strongest first."""
     peaks = []
     order = np.argsort(col_score)[::-1]
     for c in order[: max(50, width // 4)]:
@@ -292,11 +292,118 @@ def _strongest(col_score, width, min_width):
             break
         if all(abs(c - p) > min_width for p in peaks):
             peaks.append(int(c))
-        if len(peaks) == 2:
+        if len(peaks) == most:
             break
     if len(peaks) < 2:
         raise ChamberNotFound("fewer than two wall silhouettes in the base below the membrane")
     return peaks
+
+
+def _wall_side(col_score, c):
+    """Which wall the silhouette zone peaking at column ``c`` belongs to: -1 a left wall, +1 a right one, 0 unknown.
+
+    A wall's zone lies inside its well and its outer edge is the wall
+    (:mod:`osmobulge.imaging.optics`): the zone falls to half its peak
+    sharply on the wall's side and gradually into the well, when the look
+    shows it so (a flat-topped, saturated zone may fall alike on both).  The
+    side whose half-level crossing lies less than ``_SIDE_RATIO`` times as
+    far from the zone's top (the columns within 5 % of its peak) as the
+    other's is the wall's.
+    """
+    top, lo, hi = 0.95 * col_score[c], c, c  # (a flat-topped zone: its flanks from the ends of its top)
+    while lo > 0 and col_score[lo - 1] >= top:
+        lo -= 1
+    while hi < col_score.size - 1 and col_score[hi + 1] >= top:
+        hi += 1
+    dl = lo - _half_crossing(col_score, c, -1)
+    dr = _half_crossing(col_score, c, +1) - hi
+    dl, dr = (x if np.isfinite(x) else np.inf for x in (dl, dr))
+    if dl < _SIDE_RATIO * dr:
+        return -1
+    if dr < _SIDE_RATIO * dl:
+        return 1
+    return 0
+
+
+#: a zone's flank that reaches half its peak in less than this fraction of the other flank's distance is its wall's
+#: (measured, the flanks' distance ratio, left / right: the looks' left walls 0.10-1.44, right walls 0.77-9.98, of
+#: which 0.6 decides only the clear ones, e.g. 0.26 and 3.86 on ho_blind_1206c; the two strongest zones of every
+#: look are never of contrary sides)
+_SIDE_RATIO = 0.6
+#: silhouette zones weighed when the two strongest are not one well's (neighbouring wells in the field), and the
+#: share of the strongest zone's score they must reach (walls of one device show alike; a well's inner features,
+#: its zones' shoulders, score 0.15 of them on ho_blind_1206c)
+_WALL_CANDIDATES, _WALL_SHARE = 6, 0.5
+
+
+def _wall_pair(col_score, width, min_width):
+    """The columns of the two walls of the well nearest the field's centre.
+
+    The two strongest zones (:func:`_strongest`) unless they are not one
+    well's left and right wall (:func:`_wall_side`: both of one side, or a
+    right wall left of a left wall: the base between two neighbouring wells);
+    then, of the strongest :data:`_WALL_CANDIDATES` zones at least
+    :data:`_WALL_SHARE` of the strongest, the two next to each other (no such
+    zone between them), not of contrary sides, whose middle is nearest the
+    field's centre.  Measured on ho_blind_1206c (a neighbour's well beside the
+    chamber, three zones of one strength): the two strongest were the
+    chamber's right wall and the neighbour's left one, which the wall fit
+    refused.
+    """
+    peaks = _strongest(col_score, width, min_width, _WALL_CANDIDATES)
+    first = sorted(peaks[:2])
+    peaks = [c for c in peaks if col_score[c] >= _WALL_SHARE * col_score[peaks[0]]]  # (not a well's inner features)
+    sides = {c: _wall_side(col_score, c) for c in {*peaks, *first}}
+    if not (sides[first[0]] == 1 or sides[first[1]] == -1):  # (unknown sides: the two strongest, as always)
+        return first
+    cols = sorted(peaks)
+    pairs = [(cl, cr) for cl, cr in zip(cols[:-1], cols[1:], strict=True) if sides[cl] != 1 and sides[cr] != -1]
+    if not pairs:
+        raise ChamberNotFound(f"no left and right wall silhouette of one well side by side in the base below the "
+                              f"membrane (zones at columns {', '.join(map(str, cols))})")
+    return list(min(pairs, key=lambda p: abs(0.5 * (p[0] + p[1]) - 0.5 * (width - 1))))
+
+
+def neighbour_walls(maps, k, w, depth_px, strip=(0.15, 0.6), min_width=40):
+    """The nearest walls of other wells beside the well of walls ``w`` (view of quarter turn ``k`` of the flat
+    frame's :class:`FlatMaps`): ``(left, right)`` columns at the base's top surface, nan where there is none.
+
+    A neighbour on the right shows its left wall: a silhouette zone (as
+    :func:`find_walls` reads them, in the same rows of the base) at least
+    ``min_width`` px right of the right wall, of a left wall's side
+    (:func:`_wall_side`), at least :data:`_WALL_SHARE` of the weaker of the
+    well's own two zones, whose edge follows a straight line down the base
+    (:data:`MAX_WALL_RMS`); the nearest such one.  The same mirrored on the left.
+    """
+    _, _, sd = maps.view(k)
+    d = np.rot90(maps.size, k)
+    r0 = int(np.ceil(w.base_row + strip[0] * depth_px))
+    r1 = min(int(np.floor(w.base_row + strip[1] * depth_px)), d.shape[0] - 1)
+    out = [np.nan, np.nan]
+    if r1 - r0 < 5:
+        return tuple(out)
+    col_score = _column_medians(ndimage.uniform_filter1d(d[r0:r1], 3, axis=1))
+    m = col_score.size
+    lo, hi = int(np.clip(w.left, 0, m - 1)), int(np.clip(w.right, 0, m - 1))
+    own = min(col_score[lo : lo + 12].max(), col_score[max(hi - 11, 0) : hi + 1].max())  # (the zones inside the walls)
+    try:
+        peaks = _strongest(col_score, m, min_width, 2 * _WALL_CANDIDATES)
+    except ChamberNotFound:  # (fewer than two zones: the well's own at most)
+        return tuple(out)
+    rows = np.arange(r0, r1).astype(float)
+    strip_sd = sd[r0:r1]
+    for c in sorted(peaks, key=lambda c: min(abs(c - w.left), abs(c - w.right))):
+        right = c > w.right + min_width
+        if not (right or c < w.left - min_width) or col_score[c] < _WALL_SHARE * own:
+            continue
+        side = _wall_side(col_score, c)
+        if side != (-1 if right else 1) or np.isfinite(out[int(right)]):
+            continue
+        u = _wall_edges(strip_sd, c) if not right else m - 1 - _wall_edges(strip_sd[:, ::-1], m - 1 - c)
+        at, rms, n = _clipped_line(rows, u, float(w.base_row))
+        if n >= 5 and rms <= MAX_WALL_RMS:
+            out[int(right)] = float(at)
+    return tuple(out)
 
 
 def _fit_walls(sd, peaks, r0, r1, top_row, base_row):

@@ -528,9 +528,16 @@ def _tracers(first, bulge_direction, chamber_region, settings, route="band", cha
                     sil = _silhouette_tracer(first, bulge_direction, settings, chamber, p)
                 except ChamberNotFound as err:  # the band route it is: its frames are flagged (and a bulged
                     # frame the chamber was found in is warned about below); not on a dark background, which
-                    # neither route reads unless asked (a band found there does not read its own flat frame)
+                    # neither route reads unless asked (a band found there does not read its own flat frame),
+                    # nor when its rim is not this chamber's (measured blind on ho_blind_1206c, a neighbouring
+                    # well in the field: a band rim 80 % off the chamber's radius, 6 of 25 frames ok and wrong)
                     from osmobulge.imaging._facetrace import dark_background
 
+                    if off > ROUTE_RIM_TOL:
+                        raise ChamberNotFound(
+                            f"the band route's well (rim radius {band.ref.rim_radius * p * 1e6:.1f} um) is not this "
+                            f"chamber's (radius {float(chamber.radius) * 1e6:.1f} um, more than "
+                            f"{100 * ROUTE_RIM_TOL:.0f} % off), and the silhouette route: {err}") from err
                     if own.flag != "ok" and dark_background(first)[1]:
                         raise ChamberNotFound(f"the band route cannot read its own first frame ({own.flag}), "
                                               f"and {err}") from err

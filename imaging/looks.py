@@ -122,6 +122,30 @@ HELD_OUT_LOOKS: dict[str, Look] = {
                 illumination_gradient=0.1, illumination_angle=60.0, dust_count=4, bit_depth=12),
         chamber=(140e-6, 110e-6, 23e-6), pixel_size=0.9e-6, seed=62,
     ),
+    # added 2026-12-06 (third and fourth), with what no look had had: neighbouring wells in the field.  Measured
+    # once blind (25 frames, Vtilde 0..4): ho_blind_1206c (a neighbour 430 um to the right, its dome at 0.7 of this
+    # one's): the two strongest wall zones were this well's right wall and the neighbour's left one, the
+    # silhouette route refused the frame, auto kept a band route whose rim lay 80 % off the chamber's radius: 6
+    # of 25 frames ok and wrong (33x the tolerance).  ho_blind_1206d (neighbours both sides, one larger, a dyed
+    # liquid, 8 bits, dust): the silhouette route read the frames where the domes overlap flat and ok (the domes
+    # over the noise's rows had raised the noise until the dome's contrast fell below 10 of it): 8 of 25 ok and
+    # wrong.  The wall pair by the zones' sides, the search kept between the neighbours, the touching flag and
+    # the flat-after-a-dome flag followed (then: 19 and 15 of 25 ok, the rest flagged, none wrong); no longer blind
+    "ho_blind_1206c": Look(
+        Optics(n_elastomer=1.421, n_liquid=1.345, objective_na=0.28, condenser_na=0.14, defocus=4e-6,
+               halo_strength=0.25, halo_width=2e-6, wavelength=600e-9, brightness=0.5),
+        replace(_N, noise_sigma=0.012, poisson_photons=4000.0, blur_sigma=0.8, drift_sigma=0.3,
+                neighbours=((430e-6, 0.7),), bit_depth=12),
+        chamber=(150e-6, 110e-6, 20e-6), pixel_size=1.0e-6, seed=71,
+    ),
+    "ho_blind_1206d": Look(
+        Optics(n_elastomer=1.405, n_liquid=1.37, objective_na=0.22, condenser_na=0.1, defocus=-3e-6,
+               absorption_liquid=800.0, halo_strength=0.35, halo_width=4e-6),
+        replace(_N, noise_sigma=0.02, blur_sigma=1.1, tilt=0.03, drift_sigma=0.6, vignetting=0.3,
+                illumination_gradient=0.2, illumination_angle=135.0, dust_count=8, dust_opacity=0.7, bit_depth=8,
+                neighbours=((-480e-6, 1.1), (480e-6, 0.5))),
+        chamber=(190e-6, 110e-6, 25e-6), pixel_size=0.75e-6, seed=72,
+    ),
 }
 
 

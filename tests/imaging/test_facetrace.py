@@ -640,7 +640,7 @@ def test_the_noise_is_the_changes_spread_over_the_water(edge_dark):
     frame = np.asarray(edge_dark.frames[2])
     w, dx, dy = tr._walls(np.rot90(frame, tr.k))
 
-    def sample(points, directions, offsets):
+    def sample(points, directions, offsets, own=True):  # (no neighbours: the same either way)
         return tr._change(frame, points, directions, offsets, dx, dy)
 
     got = tr._noise(sample, w)
@@ -652,3 +652,67 @@ def test_the_noise_is_the_changes_spread_over_the_water(edge_dark):
     light = float(np.median(np.asarray(edge_dark.frames[0], float)[:50]))
     read = 0.01 * (2**16 - 1) / light  # (the look's noise_sigma, of full scale, over the water's level)
     assert 0.42 < got / (np.sqrt(2) * read) < 0.66
+
+
+def test_a_neighbouring_well_is_not_this_chambers_wall():
+    """ho_blind_1206c: a neighbouring well 430 um to the right (its dome 0.7 of this one's).  Measured blind, its
+    left wall's zone was as strong as this well's two, the search paired this well's right wall with it and the
+    silhouette route refused the frame; auto kept a band route 80 % off the chamber's radius, 6 of 25 frames ok and
+    wrong.  The walls are paired by their zones' sides now, the dome searched for only up to half-way to the
+    neighbour's wall, and a dome that comes near there is flagged touching."""
+    s = render_look("ho_blind_1206c", [0.0, 0.6, 3.2], lambda_pre=PRE)
+    p, a = s.truth.attrs["pixel_size"], s.truth.attrs["chamber_radius"]
+    t = SilhouetteTracer(s.frames[0], **_known(s))
+    axis = s.truth.attrs["anchor_col"]  # (the chamber's axis, px)
+    assert abs(t.walls0.rim_radius - a / p) < 0.5 and abs(t.walls0.axis_col - axis) < 0.5
+    # half-way between this well's right wall and the neighbour's left one (430 um - a from the axis); none left
+    assert t.bounds[0] == -np.inf and abs(t.bounds[1] - (axis + 0.5 * 430e-6 / p)) < 1.0
+    ds = _extract(s)
+    sc = score(s.truth, ds)
+    assert ds.attrs["tracer"] == "silhouette" and sc["n_silent"] == 0
+    assert list(ds.flag.values[:2]) == ["ok", "ok"] and np.all(sc["dv_tol"][:2] <= 1.0), sc["dv_tol"]
+    # the domes meet half-way (this one 3 px from there at Vtilde 3.0 of the blind series)
+    assert ds.flag.values[2] == "touching" and ds.neighbour_gap.values[2] < 2.5 * p
+
+
+def test_a_dome_that_reads_flat_after_a_dome_is_flagged(edge_dark):
+    """A dome does not fall flat between two frames: a frame without a dome edge after an ok frame with a dome
+    is flagged (its contrast), not measured flat.  Measured blind on ho_blind_1206d (neighbours both sides whose
+    domes overlap this one, a dyed liquid): the domes over the noise's rows raised the noise until the dome's
+    contrast fell below 10 of it, and 8 of 25 frames read flat and ok."""
+    t = SilhouetteTracer(edge_dark.frames[0], **_known(edge_dark))
+    assert t.process(edge_dark.frames[2], 2).flag == "ok"
+    flat = edge_dark.frames[0] + np.uint16(1)  # (not the reference frame itself: searched)
+    out = t.process(flat, 3)
+    assert out.mode == "flat" and out.flag == "poor_fit" and out.flag_figure == "dome_contrast"
+    assert "frame 2 had a dome" in out.message
+    # the flat first frames of a series (no dome yet) stay ok
+    t = SilhouetteTracer(edge_dark.frames[0], **_known(edge_dark))
+    assert t.process(flat, 1).flag == "ok"
+    # the blind look: its frames with overlapping domes flagged, none ok and wrong
+    s = render_look("ho_blind_1206d", [0.0, 0.6, 2.4], lambda_pre=PRE)
+    ds = _extract(s)
+    sc = score(s.truth, ds)
+    assert sc["n_silent"] == 0 and list(ds.flag.values[:2]) == ["ok", "ok"] and ds.flag.values[2] != "ok"
+    assert np.all(sc["dv_tol"][:2] <= 1.0), sc["dv_tol"]
+
+
+def test_auto_refuses_a_band_off_the_chamber_when_the_walls_are_not_found(monkeypatch):
+    """When the silhouette route cannot find the chamber and the band route's rim lies more than ROUTE_RIM_TOL
+    off the chamber's radius, auto refuses (the band is not this chamber's well) instead of keeping the band."""
+    import importlib
+
+    ex = importlib.import_module("osmobulge.imaging.extract")  # (the module: the package exports its function)
+
+    s = render_look("painted_band", [0.0, 1.0], shape=(700, 900))
+    ch = _chamber(s.truth)
+
+    def no_walls(*args, **kwargs):
+        raise ChamberNotFound("no walls (test)")
+
+    monkeypatch.setattr(ex, "_silhouette_tracer", no_walls)
+    assert _extract(s).attrs["tracer"] == "band"  # (its rim is the chamber's: kept)
+    wide = Chamber(1.5 * ch.radius, ch.depth, ch.thickness, 3000.0)
+    with pytest.raises(ChamberNotFound, match=r"not this chamber's \(radius 300.0 um.*no walls \(test\)"):
+        extract(s.frames, pixel_size=s.truth.attrs["pixel_size"], chamber=wide, progress=False,
+                frame_interval=600.0)

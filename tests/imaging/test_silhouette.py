@@ -2,9 +2,10 @@
 
 import numpy as np
 import pytest
+from scipy import ndimage
 
 from osmobulge.imaging._chamber import ChamberNotFound
-from osmobulge.imaging._silhouette import find_walls
+from osmobulge.imaging._silhouette import _strongest, _wall_pair, _wall_side, find_walls
 from osmobulge.imaging.looks import LOOKS, render_look
 from osmobulge.imaging.optics import Optics, render_optical
 
@@ -361,3 +362,38 @@ def test_clipped_wall_line_is_the_numpy_rule():
     y[20] += 8.0
     assert abs(_clipped_line(x, y, 290.0)[0] - clean) < 0.02
     assert _clipped_line(x, np.full(x.size, np.nan), 290.0)[2] == 0
+
+
+def _zone(x, wall, side, width=15.0):
+    """A wall's silhouette zone as the column score shows it: sharp at the wall, fading into the well (on the side
+    ``-side``: a left wall's (side -1) zone lies right of it), blurred by 1.5 px."""
+    inside = -side * (x - wall)
+    return ndimage.gaussian_filter1d(np.where(inside >= 0, np.exp(-inside / width), 0.0), 1.5)
+
+
+def test_a_walls_zone_falls_sharply_on_the_walls_side():
+    x = np.arange(400.0)
+    for wall, side in ((100.0, -1), (300.0, 1)):
+        z = _zone(x, wall, side)
+        assert _wall_side(z, int(np.argmax(z))) == side
+    # a symmetric, flat-topped zone (saturated): no side, wherever its peak column falls in the top
+    top = np.clip(2.0 * np.exp(-0.5 * ((x - 200.0) / 8.0) ** 2), 0.0, 1.0)
+    assert {_wall_side(top, c) for c in np.flatnonzero(top >= 1.0)} == {0}
+
+
+def test_the_wall_pair_is_one_wells_not_the_base_between_two_wells():
+    """Three zones of about one strength (this well's two walls and a neighbouring well's left one, as on
+    ho_blind_1206c): the two strongest, this well's right wall and the neighbour's left one, face away from each
+    other (the base between two wells), so the pair is the left and right wall next to each other."""
+    x = np.arange(1024.0)
+    score = 2.0 * (0.95 * _zone(x, 362.0, -1) + _zone(x, 662.0, 1) + _zone(x, 792.0, -1))
+    strongest = sorted(_strongest(score, x.size, 40))  # (the wrong pair: this well's left wall is the weakest)
+    assert abs(strongest[0] - 662) <= 4 and abs(strongest[1] - 792) <= 4
+    left, right = _wall_pair(score, x.size, 40)
+    assert abs(left - 362) <= 4 and abs(right - 662) <= 4
+    # one well's zones whose sides are unknown (symmetric): the two strongest, as always
+    sym = np.exp(-0.5 * ((x - 300.0) / 6.0) ** 2) + np.exp(-0.5 * ((x - 700.0) / 6.0) ** 2)
+    assert _wall_pair(sym, x.size, 40) == [300, 700]
+    # two zones facing away from each other and nothing else: refused, not paired
+    with pytest.raises(ChamberNotFound, match="side by side"):
+        _wall_pair(2.0 * (_zone(x, 300.0, 1) + _zone(x, 700.0, -1)), x.size, 40)
