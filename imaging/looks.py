@@ -146,6 +146,18 @@ HELD_OUT_LOOKS: dict[str, Look] = {
                 neighbours=((-480e-6, 1.1), (480e-6, 0.5))),
         chamber=(190e-6, 110e-6, 25e-6), pixel_size=0.75e-6, seed=72,
     ),
+    # added 2026-12-06 (fifth) after those changes: one chamber, a dyed liquid (1500 /m: the dome's inside darker as
+    # it grows), 10 bits; measured once, blind (25 frames, Vtilde 0..4: the silhouette route, 24 ok, 0 silent,
+    # worst volume error 0.54 of the tolerance at Vtilde 0.02, rim within 0.21 px, lambda_pre within 0.01 %; the
+    # last frame flagged: its dome's inside, over most of the noise's rows, raised the noise until the dome's
+    # contrast fell below 10 of it, so no edge was found after a frame with a dome)
+    "ho_blind_1206e": Look(
+        Optics(n_elastomer=1.415, n_liquid=1.36, objective_na=0.25, condenser_na=0.12, defocus=2e-6,
+               absorption_liquid=1500.0, halo_strength=0.3, halo_width=3e-6),
+        replace(_N, noise_sigma=0.015, blur_sigma=0.9, drift_sigma=0.3, vignetting=0.2, bit_depth=10,
+                poisson_photons=6000.0),
+        chamber=(200e-6, 110e-6, 22e-6), pixel_size=0.8e-6, seed=73,
+    ),
 }
 
 
