@@ -244,6 +244,21 @@ def _series_file(folder, n, base):
     return _write_tiff(path, (base[i % len(base)] for i in range(n)), 1e-6, 600.0)
 
 
+def _frame_copy(frames):
+    """Median over 3 passes of the time (ms per frame) to copy every frame of ``frames`` (an array in memory) into
+    a fresh array, and its bandwidth (GB/s): the least a read of the frames from the page cache costs (the series
+    is larger than the caches, so this is the memory's bandwidth)."""
+    frames = np.asarray(frames)
+    times = []
+    for _ in range(3):
+        t0 = time.perf_counter()
+        for f in frames:
+            np.array(f)
+        times.append((time.perf_counter() - t0) / len(frames))
+    t = float(np.median(times))
+    return 1e3 * t, frames[0].nbytes / t / 1e9
+
+
 def _median_pass(fn, n, before=None):
     """Median over 3 passes of ``fn()``'s time per frame (s, over ``n`` frames), and its last result;
     ``before()`` (untimed) runs ahead of each pass."""
@@ -495,6 +510,10 @@ def silhouette_day(name="edge_dark", n_day=97, series=None):
             t_ext, _ = _median_pass(lambda p=path: run(p), n, before)
             ratios[label] = t_ext / t_read
             print(f"| {label} | {1e3 * t_read:.2f} | {1e3 * t_ext:.2f} | {t_ext / t_read:.1f}x |", flush=True)
+    copy_ms, gbs = _frame_copy(s.frames)
+    print(f"\na warm TIFF read is a copy of each frame out of the page cache: copying the frames from memory alone"
+          f" takes {copy_ms:.2f} ms a frame here ({gbs:.1f} GB/s), so the warm ratio follows this machine's memory"
+          f" bandwidth (docs/architecture.md: the same code 12x on a machine whose warm read took 0.50 ms)")
     sc = score(s.truth, ds)
     print(f"\nfrom the TIFF: {int((ds.flag == 'ok').sum())}/{n} frames ok, {sc['n_silent']} silent, worst volume"
           f" error {sc['worst_dv_tol']:.2f} of the tolerance, worst rim bias"
