@@ -17,14 +17,15 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 
 from osmobulge.imaging.optics import Optics
-from osmobulge.imaging.synthetic import REFERENCE_CHAMBER, Nuisances, SyntheticSeries, render_series
+from osmobulge.imaging.synthetic import REFERENCE_CHAMBER, Nuisances, SceneGeometry, SyntheticSeries, render_series
 
 __all__ = ["Look", "LOOKS", "HELD_OUT_LOOKS", "OUTSIDE_LOOKS", "render_look"]
 
 
 @dataclass(frozen=True)
 class Look:
-    """One appearance: optics (None: painted band), nuisances, chamber (m) and pixel size (m)."""
+    """One appearance: optics (None: painted band), nuisances, chamber (m) and pixel size (m), and the scene's layout
+    (None: the chamber centred, dome up)."""
 
     optics: Optics | None
     nuisances: Nuisances = field(default_factory=lambda: Nuisances(blur_sigma=0.5))
@@ -32,6 +33,7 @@ class Look:
     pixel_size: float = 0.8e-6
     seed: int = 0
     note: str = ""
+    scene: SceneGeometry | None = None
 
 
 _N = Nuisances(blur_sigma=0.5, noise_sigma=0.01)
@@ -158,6 +160,24 @@ HELD_OUT_LOOKS: dict[str, Look] = {
                 poisson_photons=6000.0),
         chamber=(200e-6, 110e-6, 22e-6), pixel_size=0.8e-6, seed=73,
     ),
+    # added 2026-12-06 (sixth and seventh), measured once, blind (25 frames, Vtilde 0..4): ho_blind_1206f, a smaller
+    # chamber off the field's centre with a whole neighbouring well beside it, a faint film (n 1.40), drift 0.8 px
+    # a frame, 14 bits: 21 ok, the last 4 touching (the domes within 4 px of each other, then overlapping), 0
+    # silent, worst volume error 0.26 of the tolerance, rim within 0.05 px, lambda_pre within 0.05 %;
+    # ho_blind_1206g, the dome growing down the frame, halos, dust, a gradient of light: 25 ok, 0 silent, worst
+    # 0.12, rim within 0.11 px, lambda_pre within 0.03 %
+    "ho_blind_1206f": Look(
+        Optics(n_elastomer=1.40, n_liquid=1.35, objective_na=0.25, condenser_na=0.18, defocus=-4e-6),
+        replace(_N, noise_sigma=0.012, blur_sigma=0.8, drift_sigma=0.8, bit_depth=14, neighbours=((360e-6, 0.9),)),
+        chamber=(120e-6, 110e-6, 18e-6), pixel_size=0.8e-6, seed=74, scene=SceneGeometry(axis_position=(380.0, 760.0)),
+    ),
+    "ho_blind_1206g": Look(
+        Optics(n_elastomer=1.412, n_liquid=1.362, objective_na=0.3, condenser_na=0.1, defocus=5e-6, halo_strength=0.5,
+               halo_width=3e-6),
+        replace(_N, noise_sigma=0.01, blur_sigma=0.7, illumination_gradient=0.3, illumination_angle=-70.0,
+                dust_count=10, dust_opacity=0.6, drift_sigma=0.3),
+        chamber=(180e-6, 110e-6, 24e-6), pixel_size=0.8e-6, seed=75, scene=SceneGeometry(bulge_direction="down"),
+    ),
 }
 
 
@@ -190,6 +210,7 @@ def render_look(name, vtilde, *, shape=(1024, 1024), **kwargs) -> SyntheticSerie
         "optics": look.optics,
         "seed": look.seed,
         "shape": shape,
+        "scene": look.scene,
     }
     args.update(kwargs)
     series = render_series(vtilde, **args)
