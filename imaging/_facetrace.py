@@ -99,6 +99,10 @@ _JUMP_FLAG, _LOST_FLAG = 0.05, 0.10
 #: samples every _NOISE_STEP px, every other row's half a px on: the same mix of whole- and half-px positions
 #: (whose bilinear samples average two pixels) as every 0.5 px, within -0.7..+2.0 % of it, in half the samples
 _NOISE_ROWS, _NOISE_STEP = 12, 1.0
+#: ... but at most this factor times the noise on the rows highest above the top face (measured blind on
+#: ho_blind_1206e, a dyed liquid: the dome's inside, darker as it grew, over most of the rows raised the noise until
+#: the dome's own contrast fell below 10 of it; a sparse series's first dome frame at Vtilde 4 then read flat and ok)
+_NOISE_TOP_ROWS, _NOISE_TOP_FACTOR = 3, 1.25
 #: reach (px, each side) of the search along the last frame's outer face's normals, and its stations' spacing
 #: (px; samples every _RAY_STEP as on the rays)
 _TRACK_REACH, _TRACK_STATIONS = 30.0, 4.5
@@ -387,6 +391,11 @@ def _first_edges(v, t, sign, noise, size=9):
     figs = {"dome_contrast": median(strength) / max(noise, 1e-12),
             "edge_sign": float(np.mean(np.sign(extreme[strong]) == sign)) if strong.any() else 0.0}
     return te, found, jump, thr, figs
+
+
+def _mad(v):
+    """The scaled MAD of all the samples of ``v`` (the standard deviation of normal noise)."""
+    return 1.4826 * median(np.abs(v - median(v)))
 
 
 def _ends(a, x, b):
@@ -801,13 +810,15 @@ class SilhouetteTracer:
     def _noise(self, sample, w):
         """Noise of the change in the water above the top face (scaled MAD over ``_NOISE_ROWS`` horizontal
         transects across the view, sampled every ``_NOISE_STEP`` px, every other one from half a px on; the
-        dome, a minority of the samples, included); never below 1e-4 (the first frame is its own reference and
-        changes by nothing)."""
+        dome, a minority of the samples, included), at most ``_NOISE_TOP_FACTOR`` times that of the
+        ``_NOISE_TOP_ROWS`` rows highest above the top face (a dome over most of the rows); never below 1e-4
+        (the first frame is its own reference and changes by nothing)."""
         rows = np.linspace(2.0, max(w.top_row - 5.0, 10.0), _NOISE_ROWS)
         starts = 0.5 * (np.arange(_NOISE_ROWS) % 2)  # (columns)
         v = sample(np.column_stack((starts, rows)), np.tile([1.0, 0.0], (rows.size, 1)),
                    np.arange(0.0, self.view_shape[1] - 1.5, _NOISE_STEP), own=False)
-        return max(1.4826 * median(np.abs(v - median(v))), 1e-4)
+        top = v[:_NOISE_TOP_ROWS]  # (the rows highest above the top face: the last a dome reaches)
+        return max(min(_mad(v), _NOISE_TOP_FACTOR * _mad(top)), 1e-4)
 
     def _rays(self, sample, w):
         phis = np.linspace(_RAY_MIN, np.pi - _RAY_MIN, _N_RAYS)

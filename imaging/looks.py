@@ -152,7 +152,9 @@ HELD_OUT_LOOKS: dict[str, Look] = {
     # it grows), 10 bits; measured once, blind (25 frames, Vtilde 0..4: the silhouette route, 24 ok, 0 silent,
     # worst volume error 0.54 of the tolerance at Vtilde 0.02, rim within 0.21 px, lambda_pre within 0.01 %; the
     # last frame flagged: its dome's inside, over most of the noise's rows, raised the noise until the dome's
-    # contrast fell below 10 of it, so no edge was found after a frame with a dome)
+    # contrast fell below 10 of it, so no edge was found after a frame with a dome; the same in a sparse series's
+    # first dome frame, at Vtilde 4: flat and ok, 33x the tolerance).  The noise capped by the highest rows'
+    # followed (then 25 ok); no longer blind
     "ho_blind_1206e": Look(
         Optics(n_elastomer=1.415, n_liquid=1.36, objective_na=0.25, condenser_na=0.12, defocus=2e-6,
                absorption_liquid=1500.0, halo_strength=0.3, halo_width=3e-6),
