@@ -132,7 +132,8 @@ HELD_OUT_LOOKS: dict[str, Look] = {
     # liquid, 8 bits, dust): the silhouette route read the frames where the domes overlap flat and ok (the domes
     # over the noise's rows had raised the noise until the dome's contrast fell below 10 of it): 8 of 25 ok and
     # wrong.  The wall pair by the zones' sides, the search kept between the neighbours, the touching flag and
-    # the flat-after-a-dome flag followed (then: 19 and 15 of 25 ok, the rest flagged, none wrong); no longer blind
+    # the flat-after-a-dome flag followed (then: 19 and 15 of 25 ok, the rest flagged, none wrong; 19 and 14, the
+    # overlapping frames all touching, after the noise cap below); no longer blind
     "ho_blind_1206c": Look(
         Optics(n_elastomer=1.421, n_liquid=1.345, objective_na=0.28, condenser_na=0.14, defocus=4e-6,
                halo_strength=0.25, halo_width=2e-6, wavelength=600e-9, brightness=0.5),
