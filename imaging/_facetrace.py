@@ -284,6 +284,10 @@ def _plausible(d, w, l0_px, depth_px):
     """
     depth = SilhouetteTracer._depth(d, w)
     if not np.isfinite(depth):
+        if depth_px is not None and w.base_row + depth_px > d.shape[0] - 3:
+            return (f"no well bottom below the walls: a {depth_px:.0f} px deep well's bottom lies at row "
+                    f"{w.base_row + depth_px:.0f}, outside the frame's {d.shape[0]} rows (this route needs the whole "
+                    f"well in the field: its bottom and walls register the drift)")
         return "no well bottom below the walls"
     if depth_px is not None and abs(depth - depth_px) > 0.15 * depth_px:
         return f"the well bottom is {depth:.0f} px below the top face's base, not {depth_px:.0f} px"

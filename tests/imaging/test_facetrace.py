@@ -749,3 +749,16 @@ def test_a_focus_that_drifts_through_the_series_is_read():
     sc = score(s.truth, ds)
     assert list(ds.flag.values) == ["ok"] * 3 and sc["n_silent"] == 0 and np.all(sc["dv_tol"] <= 1.0), sc["dv_tol"]
     assert np.all(np.abs(sc["rim_bias_px"]) < 0.5)
+
+
+def test_a_well_whose_bottom_is_outside_the_frame_is_refused_saying_so():
+    """The silhouette route registers the drift on the base (the walls and the well's bottom): a field that cuts
+    the well's bottom off is refused, and the error says where the bottom would lie."""
+    from osmobulge.imaging.optics import Optics
+    from osmobulge.imaging.synthetic import Nuisances, SceneGeometry, render_series
+
+    s = render_series([0.0, 0.6], shape=(900, 1000), chamber=(200e-6, 110e-6, 20e-6), pixel_size=0.8e-6,
+                      optics=Optics(), nuisances=Nuisances(blur_sigma=0.5, noise_sigma=0.01),
+                      scene=SceneGeometry(axis_position=(500.0, 840.0)))
+    with pytest.raises(ChamberNotFound, match=r"bottom lies at row 9\d\d, outside the frame's 900 rows"):
+        _extract(s, tracer="silhouette")
