@@ -181,6 +181,26 @@ HELD_OUT_LOOKS: dict[str, Look] = {
                 dust_count=10, dust_opacity=0.6, drift_sigma=0.3),
         chamber=(180e-6, 110e-6, 24e-6), pixel_size=0.8e-6, seed=75, scene=SceneGeometry(bulge_direction="down"),
     ),
+    # added 2026-12-06 (eighth to tenth), measured once, blind (25 frames, Vtilde 0..4): ho_blind_1206h, a 10 um
+    # film at 1.6 um/px over a 100 um chamber (a film of 6 px, a rim of 62 px): 23 ok, 2 flagged (poor_fit), 0
+    # silent, worst 0.51 of the tolerance, rim within 0.07 px, lambda_pre within 0.09 %; ho_blind_1206i, stage
+    # drift 3 px a frame (a random walk): 25 ok, 0 silent, worst 0.22, rim within 0.07 px; ho_blind_1206j, dim
+    # light (300 photons a pixel, 8 bits): 25 ok, 0 silent, worst 0.36, rim within 0.13 px
+    "ho_blind_1206h": Look(
+        Optics(n_elastomer=1.412, objective_na=0.2, condenser_na=0.1, defocus=3e-6),
+        replace(_N, noise_sigma=0.01, blur_sigma=0.6, bit_depth=12),
+        chamber=(100e-6, 110e-6, 10e-6), pixel_size=1.6e-6, seed=81,
+    ),
+    "ho_blind_1206i": Look(
+        Optics(n_elastomer=1.414, objective_na=0.25, condenser_na=0.12, defocus=2e-6),
+        replace(_N, noise_sigma=0.01, blur_sigma=0.7, drift_sigma=3.0),
+        chamber=(160e-6, 110e-6, 20e-6), pixel_size=0.8e-6, seed=84,
+    ),
+    "ho_blind_1206j": Look(
+        Optics(n_elastomer=1.416, objective_na=0.25, condenser_na=0.12, brightness=0.3),
+        replace(_N, noise_sigma=0.0, poisson_photons=300.0, blur_sigma=0.7, bit_depth=8),
+        chamber=(180e-6, 110e-6, 22e-6), pixel_size=0.8e-6, seed=85,
+    ),
 }
 
 
