@@ -533,14 +533,14 @@ def _tracers(first, bulge_direction, chamber_region, settings, route="band", cha
                     # well in the field: a band rim 80 % off the chamber's radius, 6 of 25 frames ok and wrong)
                     from osmobulge.imaging._facetrace import dark_background
 
+                    if own.flag != "ok" and dark_background(first)[1]:
+                        raise ChamberNotFound(f"the band route cannot read its own first frame ({own.flag}), "
+                                              f"and {err}") from err
                     if off > ROUTE_RIM_TOL:
                         raise ChamberNotFound(
                             f"the band route's well (rim radius {band.ref.rim_radius * p * 1e6:.1f} um) is not this "
                             f"chamber's (radius {float(chamber.radius) * 1e6:.1f} um, more than "
                             f"{100 * ROUTE_RIM_TOL:.0f} % off), and the silhouette route: {err}") from err
-                    if own.flag != "ok" and dark_background(first)[1]:
-                        raise ChamberNotFound(f"the band route cannot read its own first frame ({own.flag}), "
-                                              f"and {err}") from err
                 else:
                     if own.flag != "ok" or _rim_off(sil.ref.rim_radius, chamber, p) <= ROUTE_RIM_TOL:
                         return [sil]
