@@ -134,6 +134,12 @@ _WALL_INSIDE = 26
 #: rows of the base the walls are followed down, as fractions of the well depth (more rows than
 #: find_walls' default, which must also work with a guessed depth)
 _STRIP = (0.1, 0.8)
+#: the flat frame's specks (dust fixed to the camera) within _SPECK_PX px of the column half-way to a neighbour,
+#: moved by the drift, are not a dome's face on it; they are looked for within _SPECK_WINDOW px of it (measured:
+#: 40 specks and drift 1 px a frame flagged every frame touching without this)
+_SPECK_PX, _SPECK_WINDOW = 8, 48
+#: columns of the base beside each wall that the well's bottom face must stand out against (:meth:`_depth`)
+_BESIDE_PX = 40
 #: largest difference (px) between the top face's rows at the field's two sides
 _MAX_TILT_PX = 1.0
 #: a background (the frame's median) below this fraction of its brightest pixels (99.9th percentile) is dark:
@@ -402,6 +408,23 @@ def _mad(v):
     return 1.4826 * median(np.abs(v - median(v)))
 
 
+def _speck_distance(sd, col):
+    """Per row of ``sd`` (the flat frame's signed deviation above the top face), the distance (px) from column ``col``
+    to the nearest speck within ``_SPECK_WINDOW`` px of it (a value more than 6 scaled MADs off the window's
+    median), inf where there is none or ``col`` is not in the frame."""
+    out = np.full(sd.shape[0], np.inf)
+    if not np.isfinite(col) or sd.shape[0] == 0:
+        return out
+    c0, c1 = max(int(col) - _SPECK_WINDOW, 0), min(int(col) + _SPECK_WINDOW + 1, sd.shape[1])
+    if c1 <= c0:
+        return out
+    win = sd[:, c0:c1]
+    mid = median(win)
+    speck = np.abs(win - mid) > 6.0 * max(_mad(win), 1e-12)
+    dist = np.where(speck, np.abs(np.arange(c0, c1) - col)[None, :], np.inf)
+    return dist.min(axis=1)
+
+
 def _ends(a, x, b):
     """``x`` between ``a`` and ``b`` (``np.r_[a, x, b]`` without its parsing: the per-frame paths build many)."""
     return np.concatenate(([a], x, [b]))
@@ -607,6 +630,9 @@ class SilhouetteTracer:
         self.bounds = None if not np.isfinite(nb).any() else (
             0.5 * (nb[0] + w.left) if np.isfinite(nb[0]) else -np.inf,
             0.5 * (nb[1] + w.right) if np.isfinite(nb[1]) else np.inf)
+        if self.bounds is not None:  # (the flat frame's specks beside those columns, :meth:`_neighbour_gap`)
+            sd = np.rot90(maps.deviation, self.k)[: max(int(w.top_row), 1)]
+            self._specks = tuple(_speck_distance(sd, b) for b in self.bounds)
         self._rim0 = (w.axis_col - w.left, w.right - w.axis_col)  # the film's material rim radii (:func:`_thickness`)
         self.polarity = 0  # the dome's sign (+1 darker than the water), from the first frame showing it
         self.shape = frame.shape
@@ -630,15 +656,18 @@ class SilhouetteTracer:
     @staticmethod
     def _depth(d, w, base_row=None):
         """Well depth (px) below ``base_row`` (default the walls'): the strongest row over the well's middle
-        that is weak outside it (the bottom face)."""
+        that is weak outside it (the bottom face), outside being the base's ``_BESIDE_PX`` columns beside each
+        wall, 20 px out (not the whole field's: neighbouring wells' bottoms lie on the same row; measured on a
+        look with a neighbour each side 133 px off, over most of the field's other columns, whose well was
+        refused as having no bottom)."""
         base_row = w.base_row if base_row is None else base_row
         c0, c1 = int(w.left + 0.2 * (w.right - w.left)), int(w.right - 0.2 * (w.right - w.left))
         r0 = int(base_row + 20)
         if r0 >= d.shape[0] - 3:
             return np.nan
         inside = np.median(d[r0:, c0:c1], axis=1)
-        out_cols = np.r_[np.arange(0, max(int(w.left) - 20, 0)), np.arange(min(int(w.right) + 20, d.shape[1]),
-                                                                            d.shape[1])]
+        out_cols = np.r_[np.arange(max(int(w.left) - 20 - _BESIDE_PX, 0), max(int(w.left) - 20, 0)),
+                         np.arange(min(int(w.right) + 20, d.shape[1]), min(int(w.right) + 20 + _BESIDE_PX, d.shape[1]))]
         outside = np.median(d[r0:, out_cols], axis=1) if out_cols.size else np.zeros_like(inside)
         score = inside - outside
         k = int(np.argmax(score))
@@ -784,10 +813,10 @@ class SilhouetteTracer:
                 out.flag, out.flag_figure, out.flag_value = "poor_fit", "dome_contrast", out.figures["dome_contrast"]
             return out
         if self.bounds is not None:
-            out.figures["neighbour_gap"] = self._neighbour_gap(sample, w, u, z, dx, noise)
+            out.figures["neighbour_gap"] = self._neighbour_gap(sample, w, u, dx, dy, noise)
         return self._finish(u, z, w, g, out)
 
-    def _neighbour_gap(self, sample, w, u, z, dx, noise):
+    def _neighbour_gap(self, sample, w, u, dx, dy, noise):
         """How near (px) the dome comes to the columns half-way to a neighbouring well (:attr:`bounds`): the
         outer face's points' least distance from them, 0 when a dome's face (a change of either sign over 10x
         the noise) lies on them above the top face (the neighbour's dome come over, or this one's)."""
@@ -798,8 +827,14 @@ class SilhouetteTracer:
                 continue
             gap = min(gap, float(np.min(side * (b + dx - w.axis_col - u))))
             if rows.size and 0.0 <= b + dx < self.view_shape[1] - 1:
-                v = sample(np.array([[b + dx, rows[0]]]), np.array([[0.0, -1.0]]), rows[0] - rows, own=False)
-                if np.max(np.abs(v)) > 10.0 * noise:
+                v = sample(np.array([[b + dx, rows[0]]]), np.array([[0.0, -1.0]]), rows[0] - rows, own=False)[0]
+                # (not where a speck of the flat frame, fixed to the camera, lies within the drift of the column)
+                near = self._specks[int(side > 0)]
+                reach = int(abs(dy)) + _SPECK_PX
+                near = ndimage.minimum_filter1d(near, 2 * reach + 1, mode="nearest")
+                idx = np.clip(np.round(rows).astype(int), 0, near.size - 1)
+                clear = near[idx] > abs(dx) + _SPECK_PX
+                if np.any(clear & (np.abs(v) > 10.0 * noise)):
                     gap = 0.0
         return max(gap, 0.0)
 

@@ -762,3 +762,18 @@ def test_a_well_whose_bottom_is_outside_the_frame_is_refused_saying_so():
                       scene=SceneGeometry(axis_position=(500.0, 840.0)))
     with pytest.raises(ChamberNotFound, match=r"bottom lies at row 9\d\d, outside the frame's 900 rows"):
         _extract(s, tracer="silhouette")
+
+
+def test_wells_each_side_and_dust_on_the_way_to_them():
+    """ho_blind_1206k: a neighbouring well each side and 40 specks of dust (fixed to the camera) with drift.
+    Measured blind: refused first (the well's bottom against the median of the field's other columns, mostly the
+    neighbours' wells, whose bottoms lie on the same row), then, that mended, every frame flagged touching (specks
+    on the column half-way to a neighbour, moved by the drift).  Now the bottom stands out against the base beside
+    the walls and the flat frame's specks are not a dome's face."""
+    s = render_look("ho_blind_1206k", [0.0, 1.0, 2.0], lambda_pre=PRE)
+    t = SilhouetteTracer(s.frames[0], **_known(s))
+    assert np.all(np.isfinite(t.bounds))  # (a neighbour each side)
+    ds = _extract(s)
+    sc = score(s.truth, ds)
+    assert list(ds.flag.values) == ["ok"] * 3 and sc["n_silent"] == 0 and np.all(sc["dv_tol"] <= 1.0), sc["dv_tol"]
+    assert np.all(np.abs(sc["rim_bias_px"]) < 0.5)
