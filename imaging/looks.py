@@ -213,6 +213,15 @@ HELD_OUT_LOOKS: dict[str, Look] = {
                 neighbours=((-420e-6, 0.6), (420e-6, 0.6))),
         chamber=(150e-6, 110e-6, 20e-6), pixel_size=0.9e-6, seed=86,
     ),
+    # added 2026-12-06 (twelfth), measured once, blind: the dome growing to the left (the device on its side), a
+    # neighbour each side (above and below in the frame), dust, drift: 18 ok, the last 7 touching, 0 silent, worst
+    # 0.24 of the tolerance, rim within 0.32 px, lambda_pre within 0.10 %
+    "ho_blind_1206l": Look(
+        Optics(n_elastomer=1.42, objective_na=0.25, condenser_na=0.14, defocus=-2e-6, halo_strength=0.3),
+        replace(_N, noise_sigma=0.012, blur_sigma=0.8, drift_sigma=0.5, dust_count=10,
+                neighbours=((-440e-6, 0.8), (440e-6, 0.7))),
+        chamber=(160e-6, 110e-6, 22e-6), pixel_size=0.9e-6, seed=87, scene=SceneGeometry(bulge_direction="left"),
+    ),
 }
 
 
