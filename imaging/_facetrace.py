@@ -418,9 +418,8 @@ def _speck_distance(sd, col):
     c0, c1 = max(int(col) - _SPECK_WINDOW, 0), min(int(col) + _SPECK_WINDOW + 1, sd.shape[1])
     if c1 <= c0:
         return out
-    win = sd[:, c0:c1]
-    mid = median(win)
-    speck = np.abs(win - mid) > 6.0 * max(_mad(win), 1e-12)
+    dev = np.abs(sd[:, c0:c1] - median(sd[:, c0:c1]))
+    speck = dev > 6.0 * max(1.4826 * median(dev), 1e-12)  # (6 scaled MADs, :func:`_mad`)
     dist = np.where(speck, np.abs(np.arange(c0, c1) - col)[None, :], np.inf)
     return dist.min(axis=1)
 

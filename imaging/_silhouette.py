@@ -183,13 +183,9 @@ def find_walls(frame, l0_px, *, strip=(0.15, 0.6), depth_px=None, min_width=40, 
         top_row = _top_face(d, l0_px, img, near=top_near, scores=scores)
     base_row = top_row + l0_px
     depth = 100.0 if depth_px is None else float(depth_px)
-    r0 = int(np.ceil(base_row + strip[0] * depth))
-    r1 = int(np.floor(base_row + strip[1] * depth))
-    r1 = min(r1, img.shape[0] - 1)
-    if r1 - r0 < 5:
+    r0, r1, col_score = _zone_scores(d, base_row, depth, strip)
+    if col_score is None:
         raise ChamberNotFound("too few base rows below the membrane to find the walls")
-    band = ndimage.uniform_filter1d(d[r0:r1], 3, axis=1)
-    col_score = _column_medians(band)  # (np.median(band, axis=0))
     if near is not None:  # the silhouettes nearest the expected walls
         half = max(min_width // 2, 3)
         peaks = []
@@ -201,6 +197,17 @@ def find_walls(frame, l0_px, *, strip=(0.15, 0.6), depth_px=None, min_width=40, 
     else:
         peaks = _wall_pair(col_score, img.shape[1], min_width)
     return _fit_walls(sd, peaks, r0, r1, top_row, base_row)
+
+
+def _zone_scores(d, base_row, depth, strip):
+    """The base's rows where the walls are read (``strip``: fractions of the well ``depth`` px below
+    ``base_row``), ``(r0, r1)``, and each column's silhouette score there: the median over those rows of the
+    deviation's size ``d`` averaged over 3 columns (None when fewer than 5 rows are in the frame)."""
+    r0 = int(np.ceil(base_row + strip[0] * depth))
+    r1 = min(int(np.floor(base_row + strip[1] * depth)), d.shape[0] - 1)
+    if r1 - r0 < 5:
+        return r0, r1, None
+    return r0, r1, _column_medians(ndimage.uniform_filter1d(d[r0:r1], 3, axis=1))  # (np.median(., axis=0))
 
 
 #: line score (relative light) below which the top face's row is the deviation's own row score's peak
@@ -376,13 +383,10 @@ def neighbour_walls(maps, k, w, depth_px, strip=(0.15, 0.6), min_width=40):
     (:data:`MAX_WALL_RMS`); the nearest such one.  The same mirrored on the left.
     """
     _, _, sd = maps.view(k)
-    d = np.rot90(maps.size, k)
-    r0 = int(np.ceil(w.base_row + strip[0] * depth_px))
-    r1 = min(int(np.floor(w.base_row + strip[1] * depth_px)), d.shape[0] - 1)
+    r0, r1, col_score = _zone_scores(np.rot90(maps.size, k), w.base_row, depth_px, strip)
     out = [np.nan, np.nan]
-    if r1 - r0 < 5:
+    if col_score is None:
         return tuple(out)
-    col_score = _column_medians(ndimage.uniform_filter1d(d[r0:r1], 3, axis=1))
     m = col_score.size
     lo, hi = int(np.clip(w.left, 0, m - 1)), int(np.clip(w.right, 0, m - 1))
     own = min(col_score[lo : lo + 12].max(), col_score[max(hi - 11, 0) : hi + 1].max())  # (the zones inside the walls)
