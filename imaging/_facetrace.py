@@ -138,6 +138,10 @@ _STRIP = (0.1, 0.8)
 #: moved by the drift, are not a dome's face on it; they are looked for within _SPECK_WINDOW px of it (measured:
 #: 40 specks and drift 1 px a frame flagged every frame touching without this)
 _SPECK_PX, _SPECK_WINDOW = 8, 48
+#: a dome within _NEAR_PX px of the column half-way to a neighbouring well has its gap to the neighbour's dome
+#: measured row by row (:meth:`_gap_rows`), each row's a running median over _GAP_ROWS rows (a speck a few rows
+#: high is not a face); the next frame's dome is then searched for up to the middle of that gap on each row
+_NEAR_PX, _GAP_ROWS = 20.0, 15
 #: columns of the base beside each wall that the well's bottom face must stand out against (:meth:`_depth`)
 _BESIDE_PX = 40
 #: largest difference (px) between the top face's rows at the field's two sides
@@ -424,6 +428,16 @@ def _speck_distance(sd, col):
     return dist.min(axis=1)
 
 
+def _speck_map(sd):
+    """Per pixel of ``sd`` (the flat frame's signed deviation above the top face), the distance (px) to the
+    nearest speck (a value more than 6 scaled MADs off its row's median), inf without any."""
+    dev = np.abs(sd - np.median(sd, axis=1, keepdims=True))
+    speck = dev > 6.0 * max(1.4826 * float(np.median(dev)), 1e-12)
+    if not speck.any():
+        return np.full(sd.shape, np.inf)
+    return ndimage.distance_transform_edt(~speck)
+
+
 def _ends(a, x, b):
     """``x`` between ``a`` and ``b`` (``np.r_[a, x, b]`` without its parsing: the per-frame paths build many)."""
     return np.concatenate(([a], x, [b]))
@@ -629,9 +643,12 @@ class SilhouetteTracer:
         self.bounds = None if not np.isfinite(nb).any() else (
             0.5 * (nb[0] + w.left) if np.isfinite(nb[0]) else -np.inf,
             0.5 * (nb[1] + w.right) if np.isfinite(nb[1]) else np.inf)
+        self._nb = nb  # (the neighbours' nearest walls' columns, view, first frame)
+        self._lim = None  # (per row, the columns the dome is searched for between, once a gap was measured)
         if self.bounds is not None:  # (the flat frame's specks beside those columns, :meth:`_neighbour_gap`)
             sd = np.rot90(maps.deviation, self.k)[: max(int(w.top_row), 1)]
             self._specks = tuple(_speck_distance(sd, b) for b in self.bounds)
+            self._speck_map = _speck_map(sd)
         self._rim0 = (w.axis_col - w.left, w.right - w.axis_col)  # the film's material rim radii (:func:`_thickness`)
         self.polarity = 0  # the dome's sign (+1 darker than the water), from the first frame showing it
         self.shape = frame.shape
@@ -787,7 +804,11 @@ class SilhouetteTracer:
             v = self._change(frame, points, directions, offsets, dx, dy)
             if own and self.bounds is not None:  # (this chamber's columns only: no neighbour's dome)
                 cols = points[:, :1] + offsets[None, :] * directions[:, :1]
-                v[(cols < self.bounds[0] + dx) | (cols > self.bounds[1] + dx)] = 0.0
+                if self._lim is None:
+                    v[(cols < self.bounds[0] + dx) | (cols > self.bounds[1] + dx)] = 0.0
+                else:  # (each row's own limits, :meth:`_neighbour_gap`)
+                    lo, hi = self._limits(points[:, 1:] + offsets[None, :] * directions[:, 1:], dy)
+                    v[(cols < lo + dx) | (cols > hi + dx)] = 0.0
             return v
 
         noise = self._noise(sample, w)
@@ -811,31 +832,119 @@ class SilhouetteTracer:
                                f"where frame {self.prev.index} had a dome {self.prev.height:.0f} px high")
                 out.flag, out.flag_figure, out.flag_value = "poor_fit", "dome_contrast", out.figures["dome_contrast"]
             return out
-        if self.bounds is not None:
-            out.figures["neighbour_gap"] = self._neighbour_gap(sample, w, u, dx, dy, noise)
-        return self._finish(u, z, w, g, out)
+        if self.bounds is None:
+            return self._finish(u, z, w, g, out)
+        self._lim_next = None
+        out.figures["neighbour_gap"] = self._neighbour_gap(sample, w, u, z, dx, dy, noise)
+        out = self._finish(u, z, w, g, out)
+        if self._lim_next is not None and out.flag in ("ok", "touching"):  # (the next frame's search limits)
+            self._lim = self._lim_next
+        return out
 
-    def _neighbour_gap(self, sample, w, u, dx, dy, noise):
-        """How near (px) the dome comes to the columns half-way to a neighbouring well (:attr:`bounds`): the
-        outer face's points' least distance from them, 0 when a dome's face (a change of either sign over 10x
-        the noise) lies on them above the top face (the neighbour's dome come over, or this one's)."""
+    def _limits(self, rows, dy):
+        """The columns (first frame's view) the dome is searched for between at view rows ``rows`` of a frame
+        drifted by ``dy`` rows (:attr:`_lim`)."""
+        idx = np.clip(np.rint(rows - dy), 0, self._lim[0].size - 1).astype(np.intp)
+        return self._lim[0][idx], self._lim[1][idx]
+
+    def _neighbour_gap(self, sample, w, u, z, dx, dy, noise):
+        """How near (px) the dome comes to a neighbouring well's dome; how near it comes to the columns it was
+        searched for between (beyond them it is not seen) when that is less than the touching flag's figure.
+
+        Those columns are first the ones half-way to the neighbouring wells
+        (:attr:`bounds`).  Once the dome comes within ``_NEAR_PX`` of one, or
+        a dome's face (a change of either sign over 10x the noise, not a
+        speck of the flat frame) lies on one above the top face, the gap is
+        measured row by row (:meth:`_gap_rows`) in this and every later
+        frame, and the next frame's dome is searched for, on each row, up to
+        the middle of the gap there (measured on ho_blind_1206c and 1206k: a
+        dome reaching the half-way column flagged touching 4 frames before
+        the neighbour's dome was near it).
+        """
         gap = np.inf
         rows = np.arange(w.top_row - 2.0 * _FOOT_PX, 0.0, -1.0)
-        for side, b in ((-1.0, self.bounds[0]), (1.0, self.bounds[1])):
+        lim = None
+        for j, (side, b) in enumerate(((-1.0, self.bounds[0]), (1.0, self.bounds[1]))):
             if not np.isfinite(b):
                 continue
-            gap = min(gap, float(np.min(side * (b + dx - w.axis_col - u))))
-            if rows.size and 0.0 <= b + dx < self.view_shape[1] - 1:
-                v = sample(np.array([[b + dx, rows[0]]]), np.array([[0.0, -1.0]]), rows[0] - rows, own=False)[0]
-                # (not where a speck of the flat frame, fixed to the camera, lies within the drift of the column)
-                near = self._specks[int(side > 0)]
-                reach = int(abs(dy)) + _SPECK_PX
-                near = ndimage.minimum_filter1d(near, 2 * reach + 1, mode="nearest")
-                idx = np.clip(np.round(rows).astype(int), 0, near.size - 1)
-                clear = near[idx] > abs(dx) + _SPECK_PX
-                if np.any(clear & (np.abs(v) > 10.0 * noise)):
-                    gap = 0.0
+            if self._lim is None:
+                near = float(np.min(side * (b + dx - w.axis_col - u)))
+            else:
+                near = float(np.min(side * (self._limits(w.top_row - z, dy)[j] + dx - w.axis_col - u)))
+            if self._lim is None and near > _NEAR_PX and not self._face_on(sample, side, b, rows, dx, dy, noise):
+                gap = min(gap, near)
+                continue
+            g, mid = self._gap_rows(sample, w, u, z, side, dx, dy, noise)
+            # (the gap measured; the face at its limits may be cut off there: that distance then)
+            gap = min(gap, g if near >= self.settings.touching_flag else min(g, near))
+            if lim is None:
+                lim = [np.full(self.view_shape[0], x) for x in self.bounds]
+            lim[j] = mid
+        if lim is not None:
+            self._lim_next = tuple(lim)
         return max(gap, 0.0)
+
+    def _face_on(self, sample, side, b, rows, dx, dy, noise):
+        """Whether a dome's face (a change of either sign over 10x the noise) lies on the half-way column ``b``
+        at ``rows`` above the top face, not where a speck of the flat frame, fixed to the camera, lies within
+        the drift of the column."""
+        if not (rows.size and 0.0 <= b + dx < self.view_shape[1] - 1):
+            return False
+        v = sample(np.array([[b + dx, rows[0]]]), np.array([[0.0, -1.0]]), rows[0] - rows, own=False)[0]
+        near = self._specks[int(side > 0)]
+        reach = int(abs(dy)) + _SPECK_PX
+        near = ndimage.minimum_filter1d(near, 2 * reach + 1, mode="nearest")
+        idx = np.clip(np.round(rows).astype(int), 0, near.size - 1)
+        clear = near[idx] > abs(dx) + _SPECK_PX
+        return bool(np.any(clear & (np.abs(v) > 10.0 * noise)))
+
+    def _gap_rows(self, sample, w, u, z, side, dx, dy, noise):
+        """The gap (px) between the dome's outer face (points ``(u, z)``) and the neighbouring dome on side
+        ``side`` (-1 left, +1 right), and the columns (first frame's view, one per row) half-way across it.
+
+        On every row above the top face, from the outer face outwards (above
+        the dome, from its outermost column) to the neighbour's wall: past the
+        face's own change (over 10x the noise), the first change over 10x the
+        noise not on a speck of the flat frame is the neighbour's dome; the
+        gap is its offset, a running median over ``_GAP_ROWS`` rows, least over
+        the rows; 0 where the two changes merge.  Half-way is taken to the wall
+        on rows where nothing is seen, never nearer than :attr:`bounds`.
+        """
+        j = int(side > 0)
+        n_rows = self.view_shape[0]
+        rows = np.arange(0.0, np.floor(w.top_row - 2.0 * _FOOT_PX) + 1.0)
+        # the outer face's outermost column on each row (the points joined every half px)
+        seg = np.hypot(np.diff(u), np.diff(z))
+        arc = np.r_[0.0, np.cumsum(seg)]
+        t = np.arange(0.0, arc[-1] + 0.5, 0.5)
+        cu, cz = np.interp(t, arc, u), np.interp(t, arc, z)
+        ri = np.rint(w.top_row - cz).astype(np.intp)
+        keep = (ri >= 0) & (ri < rows.size)
+        reach = np.full(rows.size, -np.inf)
+        np.maximum.at(reach, ri[keep], side * cu[keep])
+        start = w.axis_col + side * np.where(np.isfinite(reach), reach, np.max(side * u))
+        wall = self._nb[j] + dx if np.isfinite(self._nb[j]) else (0.0 if side < 0 else self.view_shape[1] - 1.0)
+        length = np.clip(side * (wall - start), 0.0, None)
+        offs = np.arange(0.0, max(float(length.max()), 1.0), 1.0)
+        v = sample(np.column_stack((start, rows)), np.tile([side, 0.0], (rows.size, 1)), offs, own=False)
+        loud = np.abs(v) > 10.0 * noise
+        # (not the flat frame's specks, fixed to the camera: the change shows them where they are and moved by the
+        # drift)
+        cc = np.clip(np.rint(start[:, None] + side * offs[None, :] - dx), 0, self._speck_map.shape[1] - 1)
+        rr = np.clip(np.rint(rows[:, None] - dy), 0, self._speck_map.shape[0] - 1)
+        loud &= self._speck_map[rr.astype(np.intp), cc.astype(np.intp)] > np.hypot(dx, dy) + _SPECK_PX
+        loud &= offs[None, :] < length[:, None]
+        quiet = np.argmax(~loud, axis=1)  # (past the face's own change)
+        merged = loud.all(axis=1)
+        after = loud & (offs[None, :] >= quiet[:, None])
+        hit = np.where(after.any(axis=1), offs[np.argmax(after, axis=1)], np.inf)
+        hit[merged] = 0.0
+        g = ndimage.median_filter(hit, size=_GAP_ROWS, mode="nearest")
+        mid = start + side * 0.5 * np.minimum(g, length)
+        mid = np.where(np.isfinite(g), mid, side * np.maximum(side * mid, side * (self.bounds[j] + dx)))
+        # (on the first frame's rows; the rows below the scanned ones keep the half-way column)
+        out = np.interp(np.arange(n_rows) + dy, rows, mid, right=self.bounds[j] + dx) - dx
+        return float(np.min(g)) if g.size else np.inf, out
 
     def _change(self, frame, points, directions, offsets, dx, dy):
         """The change (this frame minus the first frame moved by the drift, over the local light) along

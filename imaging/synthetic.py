@@ -895,16 +895,17 @@ def render_series(
 
     fracture_centres = rng_event.uniform(0.3, 0.7, n_t)
 
-    # automatic touching flag
-    for i in range(n_t):
-        if flags[i] != "ok" or not nb:
-            continue
+    # automatic touching flag: the bands overlap; nb_gap, the least gap between the dome's band and a neighbour's
+    nb_gap = np.full(n_t, np.inf)
+    for i in range(n_t if nb else 0):
         mid = _midline(prof.r[i], prof.z[i], a, 0.0)
         th = l0 * np.r_[prof.thickness[i][::-1], prof.thickness[i][1:]]
         for k, (off, _) in enumerate(nb):
             r_, z_, t_, _lam = (x[i] for x in nb_prof[k])
-            if _min_gap(mid[::4], th[::4], _midline(r_, z_, a, off)[::4], l0 * np.r_[t_[::-1], t_[1:]][::4]) < 0:
-                flags[i] = "touching"
+            gap = _min_gap(mid[::4], th[::4], _midline(r_, z_, a, off)[::4], l0 * np.r_[t_[::-1], t_[1:]][::4])
+            nb_gap[i] = min(nb_gap[i], gap)
+        if flags[i] == "ok" and nb_gap[i] < 0:
+            flags[i] = "touching"
 
     # -- render ----------------------------------------------------------------------
     sc = _Scene(a, h, l0, p, (rows, cols), scene, nuis)
@@ -957,6 +958,9 @@ def render_series(
         nb_v,
         optics,
     )
+    if nb:
+        truth["neighbour_gap"] = ("time", nb_gap, {"units": "m", "long_name": "least gap between the dome's band "
+                                                  "and a neighbour's (< 0: they overlap, the frame is touching)"})
     truth.attrs["dust_specks"] = specks.ravel() if specks.size else "none"
     if hasattr(chamber, "to_attrs"):  # a modeling Chamber: its loading too (Chamber.from_attrs round-trips)
         truth.attrs.update({k: float(v) for k, v in chamber.to_attrs().items()})

@@ -675,6 +675,28 @@ def test_a_neighbouring_well_is_not_this_chambers_wall():
     assert ds.flag.values[2] == "touching" and ds.neighbour_gap.values[2] < 2.5 * p
 
 
+def test_a_dome_past_the_half_way_column_is_measured_until_the_domes_meet():
+    """ho_blind_1206c: this dome, larger than its neighbour's, passes the column half-way to the neighbour's well
+    while the neighbour's dome is still far (the search stopped there and the frames were flagged touching 4
+    frames before the domes met: 19 of 23 frames without contact measured).  Once the dome comes within
+    _NEAR_PX of that column, the gap to the neighbour's dome is measured row by row (independent truth: the
+    renderer's least gap between the two bands) and the next frame is searched up to its middle: every frame
+    before contact ok and within tolerance, the frame where the domes meet touching."""
+    vt = [0.0, 2.18, 2.60, 3.04, 3.27, 3.75]  # (frames 0, 16, 18, 20, 21 and 23 of the 25-frame blind series)
+    s = render_look("ho_blind_1206c", vt, lambda_pre=PRE)
+    p = s.truth.attrs["pixel_size"]
+    ds = _extract(s)
+    sc = score(s.truth, ds)
+    truth_gap = s.truth.neighbour_gap.values / p
+    assert list(s.truth.flag.values) == ["ok"] * 5 + ["touching"]
+    assert list(ds.flag.values) == ["ok"] * 5 + ["touching"], ds.flag.values
+    assert sc["n_silent"] == 0 and np.all(sc["dv_tol"][:5] <= 1.0), sc["dv_tol"]
+    # (measured on the 25 frames: 58, 48, 39, 29, 19, 9 px against 58.3, 48.5, 38.7, 28.9, 19.1, 9.5)
+    got = ds.neighbour_gap.values[1:5] / p
+    np.testing.assert_allclose(got, truth_gap[1:5], atol=1.5)
+    assert truth_gap[1] > 50 and truth_gap[4] < 12  # (from far to near)
+
+
 def test_a_dome_that_reads_flat_after_a_dome_is_flagged(edge_dark):
     """A dome does not fall flat between two frames: a frame without a dome edge after an ok frame with a dome
     is flagged (its contrast), not measured flat.  Measured blind on ho_blind_1206d (neighbours both sides whose

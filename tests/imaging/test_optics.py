@@ -174,3 +174,10 @@ def test_score_counts_silent_errors():
     np.testing.assert_allclose(sc["dv_tol"], [2.0, 0.0], atol=1e-12)
     np.testing.assert_allclose(sc["rim_bias_px"], [0.0, 0.8], atol=1e-9)
     assert sc["n_silent"] == 1 and sc["n_flagged"] == 1 and sc["silent"].tolist() == [True, False]
+    assert sc["frac_volume_ok"] == 0.5 and sc["n_events"] == 0
+    # a frame the truth marks as an event (the domes touching) is left out of the share within tolerance
+    truth["flag"] = ("time", ["ok", "touching"])
+    ds["volume"] = ("time", [0.0, 2e-12])
+    sc = score(truth, ds)
+    assert sc["frac_volume_ok"] == 1.0 and sc["n_events"] == 1 and sc["n_events_flagged"] == 1
+    assert sc["event"].tolist() == [False, True]

@@ -532,6 +532,22 @@ def test_scene_validation_and_event_range():
         render_series([0.5], nuisances=Nuisances(neighbours=((150e-6, 1.0),)), **SMALL)
 
 
+def test_the_truth_gap_to_a_neighbour_is_the_bands_distance():
+    """The truth's least gap between the dome's band and a neighbour's: flat, the two films' ends face each
+    other across the base, offset - 2 a lambda_pre - l0 / lambda_pre**2 apart (each band's end is half its
+    thickness beyond its midline's; the film stretched equibiaxially by lambda_pre is that much thinner); growing,
+    the gap shrinks, and it is below 0 exactly on the frames flagged touching."""
+    lam = 1.02
+    nu = Nuisances(neighbours=((260e-6, 0.3), (-300e-6, 1.0)))
+    ser = render_series([0.0, 2.0, 5.0], chamber=(100e-6, 50e-6, 10e-6), nuisances=nu, shape=(512, 900),
+                        pixel_size=1e-6, lambda_pre=lam)
+    gap = ser.truth.neighbour_gap.values
+    assert gap[0] == pytest.approx(260e-6 - 2 * 100e-6 * lam - 10e-6 / lam**2, abs=1e-9)
+    assert gap[1] < gap[0]
+    assert list(ser.truth.flag.values) == ["ok", "ok", "touching"] and gap[2] < 0 < gap[1]
+    assert ser.truth.neighbour_gap.attrs["units"] == "m"
+
+
 def test_touching_truth_flag_sees_crossing_domes():
     """Small chambers with close neighbours: the domes cross between subsampled midline points.
 
