@@ -933,9 +933,10 @@ class SilhouetteTracer:
         cc = np.clip(np.rint(start[:, None] + side * offs[None, :] - dx), 0, self._speck_map.shape[1] - 1)
         rr = np.clip(np.rint(rows[:, None] - dy), 0, self._speck_map.shape[0] - 1)
         loud &= self._speck_map[rr.astype(np.intp), cc.astype(np.intp)] > np.hypot(dx, dy) + _SPECK_PX
-        loud &= offs[None, :] < length[:, None]
+        inside = offs[None, :] < length[:, None]
+        loud &= inside
         quiet = np.argmax(~loud, axis=1)  # (past the face's own change)
-        merged = loud.all(axis=1)
+        merged = ~np.any(~loud & inside, axis=1)  # (no water before the neighbour's wall)
         after = loud & (offs[None, :] >= quiet[:, None])
         hit = np.where(after.any(axis=1), offs[np.argmax(after, axis=1)], np.inf)
         hit[merged] = 0.0

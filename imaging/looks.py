@@ -227,6 +227,27 @@ HELD_OUT_LOOKS: dict[str, Look] = {
                 neighbours=((-440e-6, 0.8), (440e-6, 0.7))),
         chamber=(160e-6, 110e-6, 22e-6), pixel_size=0.9e-6, seed=87, scene=SceneGeometry(bulge_direction="left"),
     ),
+    # added 2026-12-06 (thirteenth and fourteenth) after the gap to a neighbour's dome was measured row by row,
+    # measured once, blind (25 frames, Vtilde 0..4): ho_blind_1206m, a larger neighbour (1.4x) on the left and a
+    # smaller one (0.5x) on the right, dust, drift: the 15 frames before the domes meet ok and within tolerance,
+    # the 10 touching frames (the truth's) all flagged, 0 silent, worst 0.29 of the tolerance, rim within 0.11 px;
+    # ho_blind_1206n, the dome growing down the frame between two neighbours of 0.9x, 330 um off: 15 ok, 1
+    # flagged touching with the bands 6 px apart, the 9 touching frames flagged, 0 silent, worst 0.17, rim within
+    # 0.16 px
+    "ho_blind_1206m": Look(
+        Optics(n_elastomer=1.417, n_liquid=1.35, objective_na=0.3, condenser_na=0.15, defocus=-3e-6,
+               halo_strength=0.3, halo_width=2.5e-6),
+        replace(_N, noise_sigma=0.012, blur_sigma=0.8, drift_sigma=0.7, dust_count=20, dust_opacity=0.6,
+                bit_depth=12, neighbours=((-400e-6, 1.4), (380e-6, 0.5))),
+        chamber=(150e-6, 110e-6, 22e-6), pixel_size=0.85e-6, seed=91,
+    ),
+    "ho_blind_1206n": Look(
+        Optics(n_elastomer=1.41, n_liquid=1.345, objective_na=0.25, condenser_na=0.12, defocus=4e-6,
+               halo_strength=0.2),
+        replace(_N, noise_sigma=0.015, blur_sigma=0.9, drift_sigma=0.5, illumination_gradient=0.3,
+                illumination_angle=20.0, bit_depth=10, neighbours=((-330e-6, 0.9), (330e-6, 0.9))),
+        chamber=(130e-6, 110e-6, 20e-6), pixel_size=0.8e-6, seed=92, scene=SceneGeometry(bulge_direction="down"),
+    ),
 }
 
 
