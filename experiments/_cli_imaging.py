@@ -69,7 +69,12 @@ def extract(
     rim_um: Annotated[str | None, typer.Option(help="When the chamber is not found: its rim in the flat frame, "
                                                     "'x0,y0,x1,y1' (um, x = col * pixel size, y = row * pixel "
                                                     "size), the flat mid-line's ends at the two walls.")] = None,
+    max_drift_px: Annotated[float | None, typer.Option(help="Largest stage drift (px) followed (default 40; from the "
+                                                            "first frame on the silhouette route, frame to frame on "
+                                                            "the band route): raise it when the stage was moved "
+                                                            "during the series.")] = None,
     errors: Annotated[str, typer.Option(help="flag: keep unmeasurable frames flagged; raise: stop.")] = "flag",
+    overwrite: Annotated[bool, typer.Option(help="Replace OUT if it exists.")] = False,
     progress: Annotated[bool, typer.Option(help="Show a progress bar.")] = True,
     as_json: Annotated[bool, typer.Option("--json", help="Print the summary as JSON.")] = False,
 ):
@@ -101,6 +106,16 @@ def extract(
             raise typer.BadParameter(f"{rim_um!r} is not four numbers 'x0,y0,x1,y1' (um)",
                                      param_hint="--rim-um") from None
     ch = _chamber(chamber, chamber_radius_um, chamber_depth_um, membrane_thickness_um, concentration_molar)
+    settings = None
+    if max_drift_px is not None:
+        from osmobulge.imaging.trace import TraceSettings
+
+        try:
+            settings = TraceSettings(max_drift=max_drift_px)
+        except ValueError as err:
+            raise typer.BadParameter(str(err), param_hint="--max-drift-px") from None
+    if out.exists() and not overwrite:
+        raise typer.BadParameter(f"{str(out)!r} exists; pass --overwrite to replace it", param_hint="OUT")
     try:
         ds = _extract(
             source,
@@ -113,6 +128,7 @@ def extract(
             progress=progress and not as_json,
             reference_frame=reference_frame,
             rim=rim,
+            settings=settings,
         )
     except (ValueError, RuntimeError) as err:
         typer.echo(f"error: {err}", err=True)

@@ -754,8 +754,9 @@ class SilhouetteTracer:
         rows_p, cols_p = _profiles(img[slice(*self._reg_rows)])
         dy, dx = -self._reg_ref[0].shift(rows_p), -self._reg_ref[1].shift(cols_p)
         if max(abs(dx), abs(dy)) > self.settings.max_drift:
-            raise ChamberNotFound(f"the base moved {np.hypot(dx, dy):.0f} px since the first frame (more than "
-                                  f"max_drift)")
+            raise ChamberNotFound(f"the base moved {np.hypot(dx, dy):.0f} px since the first frame, more than "
+                                  f"max_drift ({self.settings.max_drift:g} px): if the stage was moved, raise it "
+                                  f"(settings=TraceSettings(max_drift=...), --max-drift-px)")
         w0 = self.walls0
         # only the strip of the base the walls are followed down, and the columns around them
         top = w0.top_row + dy

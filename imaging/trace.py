@@ -137,7 +137,9 @@ class TraceSettings:
     asymmetry_flag : float
         Left/right volume disagreement that flags ``poor_fit``.
     max_drift : float
-        Largest frame-to-frame drift searched by the phase correlation.
+        Largest drift (px) searched by the phase correlation: frame to frame on
+        the band route, from the first frame on the silhouette route (a frame
+        past it is ``no_membrane``, saying so; raise it when the stage was moved).
     well_membrane_flag : float
         Fraction of the well's interior with membrane contrast above which a frame
         without a dome is ``fractured`` (torn flaps in the well) rather than ``no_membrane``.

@@ -203,10 +203,19 @@ def test_cli_extract(series, tmp_path):
     assert bad.exit_code != 0 and ".txt" in bad.output
     half = CliRunner().invoke(app, ["extract", str(path), str(out), "--chamber-radius-um", "100"])
     assert half.exit_code != 0 and "membrane-thickness" in half.output
+    drift = CliRunner().invoke(app, ["extract", str(path), str(out), "--max-drift-px", "-5"])
+    assert drift.exit_code != 0 and "max_drift" in drift.output
+    # an existing OUT is not replaced unless asked
+    before = out.read_bytes()
+    again = CliRunner().invoke(app, args + ["--max-drift-px", "60"])
+    assert again.exit_code != 0 and "--overwrite" in again.output and out.read_bytes() == before
+    res = CliRunner().invoke(app, args + ["--max-drift-px", "60", "--overwrite"])
+    assert res.exit_code == 0, res.output
+    assert load_extraction(out).attrs["trace_max_drift"] == 60.0
     rim = CliRunner().invoke(app, ["extract", str(path), str(out), "--rim-um", "1,2,3"])
     assert rim.exit_code != 0 and "four numbers" in rim.output
     rim = CliRunner().invoke(app, ["extract", str(path), str(out), "--rim-um", "100,200,300,200",
-                                   "--chamber-region", "0"])
+                                   "--chamber-region", "0", "--overwrite"])
     assert rim.exit_code == 2 and "rim= locates" in rim.output
     # the later part of the series, with the first frame as the reference
     from osmobulge.imaging.io import write_series

@@ -16,6 +16,7 @@ from osmobulge.imaging._chamber import ChamberNotFound
 from osmobulge.imaging._facetrace import SilhouetteTracer, dark_background
 from osmobulge.imaging.extract import extract
 from osmobulge.imaging.looks import LOOKS, render_look, score
+from osmobulge.imaging.trace import TraceSettings
 from osmobulge.modeling import PreStretch
 from osmobulge.modeling.transport import Chamber
 
@@ -673,6 +674,23 @@ def test_a_neighbouring_well_is_not_this_chambers_wall():
     assert list(ds.flag.values[:2]) == ["ok", "ok"] and np.all(sc["dv_tol"][:2] <= 1.0), sc["dv_tol"]
     # the domes meet half-way (this one 3 px from there at Vtilde 3.0 of the blind series)
     assert ds.flag.values[2] == "touching" and ds.neighbour_gap.values[2] < 2.5 * p
+
+
+def test_a_stage_moved_past_max_drift_is_flagged_saying_how_to_follow_it(edge_dark):
+    """A stage moved 60 px right and 25 px up after the first frame (the whole frame rolled): past max_drift (40
+    px by default) the frame is no_membrane and the message names the setting; with max_drift 100 it is measured
+    as the unmoved frame is (measured blind on a series bumped by 120 and 40 px at frame 8: the 17 frames after
+    flagged; with max_drift 200 all 25 ok, worst 0.44 of the tolerance)."""
+    p = edge_dark.truth.attrs["pixel_size"]
+    moved = np.roll(np.asarray(edge_dark.frames[2]), (-25, 60), axis=(0, 1))
+    out = SilhouetteTracer(edge_dark.frames[0], **_known(edge_dark)).process(moved, 2)
+    assert out.flag == "no_membrane" and "max_drift (40 px)" in out.message and "--max-drift-px" in out.message
+    t = SilhouetteTracer(edge_dark.frames[0], **_known(edge_dark), settings=TraceSettings(max_drift=100.0))
+    out = t.process(moved, 2)
+    assert out.flag == "ok" and out.drift == pytest.approx((60.0, -25.0), abs=0.1)
+    want = SilhouetteTracer(edge_dark.frames[0], **_known(edge_dark)).process(edge_dark.frames[2], 2)
+    assert out.volume == pytest.approx(want.volume, rel=2e-3)
+    assert out.volume * p**3 == pytest.approx(float(edge_dark.truth.volume[2]), rel=0.03)
 
 
 def test_a_dome_past_the_half_way_column_is_measured_until_the_domes_meet():
