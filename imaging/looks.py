@@ -248,6 +248,14 @@ HELD_OUT_LOOKS: dict[str, Look] = {
                 illumination_angle=20.0, bit_depth=10, neighbours=((-330e-6, 0.9), (330e-6, 0.9))),
         chamber=(130e-6, 110e-6, 20e-6), pixel_size=0.8e-6, seed=92, scene=SceneGeometry(bulge_direction="down"),
     ),
+    # added 2026-12-06 (fifteenth), measured once, blind: an exposure that saturates the water (brightness 1.0,
+    # the faces' bright halos clipped at full scale), 12 bits: 25 ok, 0 silent, worst 0.13, rim within 0.23 px
+    "ho_blind_1206o": Look(
+        Optics(n_elastomer=1.415, n_liquid=1.35, objective_na=0.25, condenser_na=0.12, defocus=3e-6,
+               halo_strength=0.4, halo_width=3e-6, brightness=1.0),
+        replace(_N, noise_sigma=0.01, blur_sigma=0.7, vignetting=0.1, drift_sigma=0.3, bit_depth=12),
+        chamber=(170e-6, 110e-6, 21e-6), pixel_size=0.85e-6, seed=94,
+    ),
 }
 
 
