@@ -142,6 +142,9 @@ _SPECK_PX, _SPECK_WINDOW = 8, 48
 #: measured row by row (:meth:`_gap_rows`), each row's a running median over _GAP_ROWS rows (a speck a few rows
 #: high is not a face); the next frame's dome is then searched for up to the middle of that gap on each row
 _NEAR_PX, _GAP_ROWS = 20.0, 15
+#: how far (px) beyond the outer face the neighbour's dome is looked for (a gap further is not measured: the next
+#: frame's search then reaches half of it past the face, never less than the half-way column)
+_GAP_REACH = 64.0
 #: columns of the base beside each wall that the well's bottom face must stand out against (:meth:`_depth`)
 _BESIDE_PX = 40
 #: largest difference (px) between the top face's rows at the field's two sides
@@ -903,29 +906,33 @@ class SilhouetteTracer:
         """The gap (px) between the dome's outer face (points ``(u, z)``) and the neighbouring dome on side
         ``side`` (-1 left, +1 right), and the columns (first frame's view, one per row) half-way across it.
 
-        On every row above the top face, from the outer face outwards (above
-        the dome, from its outermost column) to the neighbour's wall: past the
+        On every row above the top face up to ``_GAP_ROWS`` above the dome,
+        from the outer face outwards (above the dome, from its outermost
+        column) to the neighbour's wall, at most ``_GAP_REACH`` px: past the
         face's own change (over 10x the noise), the first change over 10x the
         noise not on a speck of the flat frame is the neighbour's dome; the
         gap is its offset, a running median over ``_GAP_ROWS`` rows, least over
-        the rows; 0 where the two changes merge.  Half-way is taken to the wall
-        on rows where nothing is seen, never nearer than :attr:`bounds`.
+        the rows (inf when none is seen); 0 where the two changes merge.  On
+        rows where nothing is seen half-way is taken to the scan's end, never
+        nearer than :attr:`bounds`; the other rows keep :attr:`bounds`.
         """
         j = int(side > 0)
         n_rows = self.view_shape[0]
-        rows = np.arange(0.0, np.floor(w.top_row - 2.0 * _FOOT_PX) + 1.0)
         # the outer face's outermost column on each row (the points joined every half px)
         seg = np.hypot(np.diff(u), np.diff(z))
         arc = np.r_[0.0, np.cumsum(seg)]
         t = np.arange(0.0, arc[-1] + 0.5, 0.5)
         cu, cz = np.interp(t, arc, u), np.interp(t, arc, z)
         ri = np.rint(w.top_row - cz).astype(np.intp)
+        r0 = max(int(ri.min()) - _GAP_ROWS, 0)
+        rows = np.arange(float(r0), np.floor(w.top_row - 2.0 * _FOOT_PX) + 1.0)
+        ri -= r0
         keep = (ri >= 0) & (ri < rows.size)
         reach = np.full(rows.size, -np.inf)
         np.maximum.at(reach, ri[keep], side * cu[keep])
         start = w.axis_col + side * np.where(np.isfinite(reach), reach, np.max(side * u))
         wall = self._nb[j] + dx if np.isfinite(self._nb[j]) else (0.0 if side < 0 else self.view_shape[1] - 1.0)
-        length = np.clip(side * (wall - start), 0.0, None)
+        length = np.clip(side * (wall - start), 0.0, _GAP_REACH)
         offs = np.arange(0.0, max(float(length.max()), 1.0), 1.0)
         v = sample(np.column_stack((start, rows)), np.tile([side, 0.0], (rows.size, 1)), offs, own=False)
         loud = np.abs(v) > 10.0 * noise
@@ -944,8 +951,8 @@ class SilhouetteTracer:
         g = ndimage.median_filter(hit, size=_GAP_ROWS, mode="nearest")
         mid = start + side * 0.5 * np.minimum(g, length)
         mid = np.where(np.isfinite(g), mid, side * np.maximum(side * mid, side * (self.bounds[j] + dx)))
-        # (on the first frame's rows; the rows below the scanned ones keep the half-way column)
-        out = np.interp(np.arange(n_rows) + dy, rows, mid, right=self.bounds[j] + dx) - dx
+        # (on the first frame's rows; the rows outside the scanned ones keep the half-way column)
+        out = np.interp(np.arange(n_rows) + dy, rows, mid, left=self.bounds[j] + dx, right=self.bounds[j] + dx) - dx
         return float(np.min(g)) if g.size else np.inf, out
 
     def _change(self, frame, points, directions, offsets, dx, dy):
