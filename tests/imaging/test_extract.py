@@ -325,7 +325,7 @@ def test_all_chambers_in_the_field_are_stacked(tmp_path):
     assert load_extraction(out).sizes["chamber"] == 3
     both = CliRunner().invoke(app, [*args[:-1], "--chamber-region", "1"])
     assert both.exit_code != 0 and "not both" in both.output
-    table = CliRunner().invoke(app, [*args[:-1], "--no-progress"])  # the rich table, lists per chamber
+    table = CliRunner().invoke(app, [*args[:-1], "--no-progress", "--overwrite"])  # the rich table, per chamber
     assert table.exit_code == 0, table.output
     assert "vtilde_max" in table.output and "up" in table.output
     # a profile picked over no traced chamber (a well cut by the field's edge) is not used, with a warning
