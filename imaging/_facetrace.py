@@ -648,6 +648,7 @@ class SilhouetteTracer:
             0.5 * (nb[1] + w.right) if np.isfinite(nb[1]) else np.inf)
         self._nb = nb  # (the neighbours' nearest walls' columns, view, first frame)
         self._lim = None  # (per row, the columns the dome is searched for between, once a gap was measured)
+        self._lim_next = None  # (this frame's measured ones, for the next frame)
         if self.bounds is not None:  # (the flat frame's specks beside those columns, :meth:`_neighbour_gap`)
             sd = np.rot90(maps.deviation, self.k)[: max(int(w.top_row), 1)]
             self._specks = tuple(_speck_distance(sd, b) for b in self.bounds)
