@@ -393,11 +393,14 @@ def render_optical(shape, to_scene, chambers, a, h, l0, pixel_size, optics: Opti
     u, w = to_scene(pc, pr)
     cover = []
     opd, p_film, p_base, p_liq = optical_path(u, w, chambers, a, h, l0, optics, dw=q, cover_out=cover)
-    # the slopes: across the columns without reaching over a silhouette (walls, the dome's sides); across the
-    # rows the same above the top face (the dome's top), central at and below it, where the flat faces' lines
-    # are the steps of their area-weighted paths
-    g_row = np.where(w > 0.5 * l0 + 1.5 * q, _minmod_gradient(opd, q, 0), np.gradient(opd, q, axis=0))
-    g_col = _minmod_gradient(opd, q, 1)
+    # the slopes: along the rim line (u) without reaching over a silhouette (walls, the dome's sides); across it
+    # (w) the same above the top face (the dome's top), central at and below it, where the flat faces' lines are
+    # the steps of their area-weighted paths (a one-sided smaller slope of a step is 0: the faces vanished when
+    # the dome grew left or right, w along the columns, until the image axis was taken from w's own direction)
+    ax_w = 0 if abs(w[-1, 0] - w[0, 0]) * sub[1] >= abs(w[0, -1] - w[0, 0]) * sub[0] else 1
+    g_w = np.where(w > 0.5 * l0 + 1.5 * q, _minmod_gradient(opd, q, ax_w), np.gradient(opd, q, axis=ax_w))
+    g_u = _minmod_gradient(opd, q, 1 - ax_w)
+    g_row, g_col = (g_w, g_u) if ax_w == 0 else (g_u, g_w)
     theta = np.hypot(g_row, g_col)
     light = _blend_silhouettes(transmission(theta, optics), cover)
     absorb = optics.absorption_film * p_film + optics.absorption_base * p_base + optics.absorption_liquid * p_liq

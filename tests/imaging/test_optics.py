@@ -135,6 +135,39 @@ def test_defocus_puts_bent_light_on_opposite_sides():
     assert (b_neg > 1.03) != (b_pos > 1.03) or (a_neg > 1.03) != (a_pos > 1.03)
 
 
+def test_the_optics_image_does_not_depend_on_the_devices_orientation():
+    """The same flat frame and dome rendered growing up, right, down and left, each turned back to up: the top
+    face's and the film's lower face's lines (the steps of their area-weighted paths) are the same.  Measured
+    before the fix: growing right or left, the top face's line was gone (its step along the columns met the
+    one-sided, smaller slope, which is 0 across a step) and the lower face's was 0.16 dark, not 0.45."""
+    from osmobulge.imaging.synthetic import SceneGeometry
+
+    kw = {"optics": Optics(n_elastomer=1.42, objective_na=0.2, condenser_na=0.1, defocus=4e-6),
+          "nuisances": Nuisances(noise_sigma=0.0, blur_sigma=0.6), "chamber": (150e-6, 110e-6, 22e-6),
+          "pixel_size": 1.6e-6, "shape": (512, 512)}
+    lines = {}
+    for k, d in enumerate(("up", "right", "down", "left")):
+        s = render_series([0.0, 2.5], scene=SceneGeometry(bulge_direction=d), **kw)
+        up = np.rot90(s.frames.astype(float), k, axes=(1, 2))
+        # (the rim line's row once turned up: np.rot90 takes row r of "down" to 511 - r, column c of "right"
+        # to row 511 - c and of "left" to row c)
+        rim = {"up": float(s.truth.rim_y[0]), "down": 511 - float(s.truth.rim_y[0]),
+               "right": 511 - float(s.truth.axis_x[0]), "left": float(s.truth.axis_x[0])}[d]
+        bg = np.median(up[0, :60])
+        r = int(round(rim))
+        for name, c in (("outside", 60), ("centre", 256)):
+            prof = up[0, r - 15 : r + 16, c] / bg - 1.0
+            lines[d, name] = (prof.min(), r - 15 + int(np.argmin(prof)) - rim)
+        lines[d, "dome"] = (up[1] / bg).mean()  # (the light the dome frame's faces and walls take)
+    for d in ("right", "down", "left"):
+        for name in ("outside", "centre"):
+            depth, at = lines[d, name]
+            assert depth == pytest.approx(lines["up", name][0], abs=0.01), (d, name, lines)
+            assert at == pytest.approx(lines["up", name][1], abs=1.0), (d, name, lines)
+        assert lines[d, "dome"] == pytest.approx(lines["up", "dome"], abs=0.002)
+    assert lines["up", "outside"][0] < -0.2 and lines["up", "centre"][0] < -0.4  # (the top face; the lower face)
+
+
 def test_optics_rejects_bad_input():
     with pytest.raises(ValueError, match="n_elastomer"):
         Optics(n_elastomer=0.5)
