@@ -333,10 +333,11 @@ def _straightest(maps, names, l0_px, depth_px, known_l0, locate=None):
     return best, errors
 
 
-def _upright(maps, l0_px, depth_px, known_l0):
+def _upright(maps, l0_px, depth_px, known_l0, radius_px=None):
     """The quarter turn whose view shows a chamber dome side up (walls below a top face), and its walls: the
     straightest plausible one (:func:`_straightest`)."""
-    best, errors = _straightest(maps, ROTATIONS, l0_px, depth_px, known_l0)
+    locate = None if radius_px is None else (lambda k: {"radius_px": radius_px})
+    best, errors = _straightest(maps, ROTATIONS, l0_px, depth_px, known_l0, locate)
     if best is None:
         raise ChamberNotFound("no top face with two wall silhouettes below it in any orientation (" +
                               "; ".join(errors) + ")")
@@ -582,11 +583,16 @@ class SilhouetteTracer:
         ``(col, row)`` px (e.g. the ends of a flat profile picked in napari):
         the top face and walls are then looked for within a few px of them
         (``max(l0/2, 4)`` rows, 20 columns) instead of over the frame.
+    radius_px : float, optional
+        The chamber's radius (px) when known: a pair of wall zones more than
+        15 % off it is not taken when a pair of it is there (several wells
+        side by side, :func:`_silhouette._wall_pair`).
     """
 
     route = "silhouette"
 
-    def __init__(self, first_frame, *, l0_px=None, depth_px=None, bulge_direction="auto", settings=None, rim=None):
+    def __init__(self, first_frame, *, l0_px=None, depth_px=None, bulge_direction="auto", settings=None, rim=None,
+                 radius_px=None):
         frame = np.asarray(first_frame)
         if frame.ndim != 2:
             raise ValueError(f"frames must be 2-D (H, W), got shape {frame.shape}")
@@ -609,10 +615,10 @@ class SilhouetteTracer:
             bulge_direction, self.k, w = _at_rim(maps, rim, guess, depth_px, l0_px is not None, bulge_direction)
             near = (w.left, w.right)
         elif bulge_direction == "auto":
-            bulge_direction, self.k, w = _upright(maps, guess, depth_px, l0_px is not None)
+            bulge_direction, self.k, w = _upright(maps, guess, depth_px, l0_px is not None, radius_px)
         else:
             self.k = ROTATIONS[bulge_direction]
-            w = _walls_any_depth(maps, self.k, guess, depth_px)
+            w = _walls_any_depth(maps, self.k, guess, depth_px, radius_px=radius_px)
             why = _plausible(np.rot90(maps.size, self.k), w, l0_px, depth_px)
             if why:
                 raise ChamberNotFound(f"no chamber seen dome side {bulge_direction}: {why}")
@@ -635,7 +641,7 @@ class SilhouetteTracer:
                                       "(its depth)")
         self.depth = float(depth_px)
         w = find_walls(None, self.l0, depth_px=self.depth, top_row=w.top_row, strip=_STRIP, near=near,
-                       maps=(maps, self.k))
+                       maps=(maps, self.k), radius_px=None if near is not None else radius_px)
         self._check_upright(d, w)
         self._check_flat(d, w)
         self.walls0 = w

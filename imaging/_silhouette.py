@@ -26,7 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from numba import njit
-from scipy import ndimage
+from scipy import ndimage, signal
 
 from osmobulge.imaging._chamber import ChamberNotFound
 from osmobulge.imaging._kernels import _lerp, _masked_line, _rank
@@ -123,7 +123,7 @@ def _scaled_deviation(img, bg):
 
 
 def find_walls(frame, l0_px, *, strip=(0.15, 0.6), depth_px=None, min_width=40, top_row=None,
-               near=None, top_near=None, light=None, maps=None) -> SilhouetteWalls:
+               near=None, top_near=None, light=None, maps=None, radius_px=None) -> SilhouetteWalls:
     """Find the top face and the two walls of the central well in a flat, bulge-up frame.
 
     Parameters
@@ -156,6 +156,9 @@ def find_walls(frame, l0_px, *, strip=(0.15, 0.6), depth_px=None, min_width=40, 
         The frame's maps and the quarter turn ``frame`` is of them (``frame``
         and ``light`` are then not read): the same walls, without computing
         again what the turns share.
+    radius_px : float, optional
+        The chamber's radius (px) when known: the walls are a pair of zones
+        about that far from their middle (:func:`_wall_pair`).
 
     Raises
     ------
@@ -195,7 +198,7 @@ def find_walls(frame, l0_px, *, strip=(0.15, 0.6), depth_px=None, min_width=40, 
                 raise ChamberNotFound(f"no wall silhouette within {half} px of column {c:.0f}")
             peaks.append(c0 + int(np.argmax(col_score[c0:c1])))
     else:
-        peaks = _wall_pair(col_score, img.shape[1], min_width)
+        peaks = _wall_pair(col_score, img.shape[1], min_width, radius_px)
     return _fit_walls(sd, peaks, r0, r1, top_row, base_row)
 
 
@@ -341,10 +344,44 @@ _SIDE_RATIO = 0.6
 #: share of the strongest zone's score they must reach (walls of one device show alike; a well's inner features,
 #: its zones' shoulders, score 0.15 of them on ho_blind_1206c)
 _WALL_CANDIDATES, _WALL_SHARE = 6, 0.5
+#: with the chamber's radius known, a pair of wall zones whose half-distance lies more than _RADIUS_TOL off it is not
+#: the chamber's well: the neighbouring zones (down to _RADIUS_GAP px apart: the walls of wells 40 um apart at 1.6
+#: um/px lie 30 px apart, below find_walls' min_width) are paired again (:func:`_wall_pair`)
+_RADIUS_TOL, _RADIUS_GAP = 0.15, 8
 
 
-def _wall_pair(col_score, width, min_width):
-    """The columns of the two walls of the well nearest the field's centre.
+def _wall_pair(col_score, width, min_width, radius_px=None):
+    """The columns of the two walls of the well nearest the field's centre (of the chamber's radius, when
+    ``radius_px`` is given and the pair :func:`_zone_pair` finds is not of it).
+
+    With ``radius_px``: of the zones (:func:`_zone_peaks`), the two next to each other,
+    not of contrary sides, whose half-distance lies within
+    :data:`_RADIUS_TOL` of the radius, nearest the field's centre (measured
+    blind: three wells 40 um apart at 1.6 um/px, whose inner walls' zones lie
+    30 px apart, read as one well from the first's left wall to the third's
+    right one, 3.3x the radius); :func:`_zone_pair`'s pair when there is none.
+    """
+    try:
+        pair, err = _zone_pair(col_score, width, min_width), None
+    except ChamberNotFound as e:
+        pair, err = None, e
+    if radius_px is None or (pair is not None and abs(0.5 * (pair[1] - pair[0]) / radius_px - 1.0) <= _RADIUS_TOL):
+        if pair is None:
+            raise err
+        return pair
+    peaks = _zone_peaks(col_score)
+    sides = {c: _wall_side(col_score, c) for c in peaks}
+    fits = [(cl, cr) for cl, cr in zip(peaks[:-1], peaks[1:], strict=True)
+            if sides[cl] != 1 and sides[cr] != -1 and abs(0.5 * (cr - cl) / radius_px - 1.0) <= _RADIUS_TOL]
+    if fits:
+        return list(min(fits, key=lambda p: abs(0.5 * (p[0] + p[1]) - 0.5 * (width - 1))))
+    if pair is None:
+        raise err
+    return pair
+
+
+def _zone_pair(col_score, width, min_width):
+    """The columns of the two walls of the well nearest the field's centre, from the zones alone.
 
     The two strongest zones (:func:`_strongest`) unless they are not one
     well's left and right wall (:func:`_wall_side`: both of one side, or a
@@ -355,19 +392,57 @@ def _wall_pair(col_score, width, min_width):
     field's centre.  Measured on ho_blind_1206c (a neighbour's well beside the
     chamber, three zones of one strength): the two strongest were the
     chamber's right wall and the neighbour's left one, which the wall fit
-    refused.
+    refused.  Nor are they when other wells lie between them
+    (:func:`_wells_between`).
     """
     peaks = _strongest(col_score, width, min_width, _WALL_CANDIDATES)
     first = sorted(peaks[:2])
     peaks = [c for c in peaks if col_score[c] >= _WALL_SHARE * col_score[peaks[0]]]  # (not a well's inner features)
     sides = {c: _wall_side(col_score, c) for c in {*peaks, *first}}
     if not (sides[first[0]] == 1 or sides[first[1]] == -1):  # (unknown sides: the two strongest, as always)
-        return first
+        inner = _wells_between(col_score, width, min_width, first)
+        return first if inner is None else inner
     cols = sorted(peaks)
     pairs = [(cl, cr) for cl, cr in zip(cols[:-1], cols[1:], strict=True) if sides[cl] != 1 and sides[cr] != -1]
     if not pairs:
         raise ChamberNotFound(f"no left and right wall silhouette of one well side by side in the base below the "
                               f"membrane (zones at columns {', '.join(map(str, cols))})")
+    return list(min(pairs, key=lambda p: abs(0.5 * (p[0] + p[1]) - 0.5 * (width - 1))))
+
+
+def _zone_peaks(col_score):
+    """The zones' peaks (local maxima of the column score at least :data:`_RADIUS_GAP` px apart and at least
+    :data:`_WALL_SHARE` of the strongest), left to right: each wall's once, however close the walls (a zone's
+    fading side is not a zone of its own, as the strongest columns :data:`_RADIUS_GAP` apart would take it)."""
+    top = float(np.max(col_score)) if col_score.size else 0.0
+    if top < 0.1:
+        return []
+    peaks, _ = signal.find_peaks(col_score, height=_WALL_SHARE * top, distance=_RADIUS_GAP)
+    return [int(c) for c in peaks]
+
+
+def _wells_between(col_score, width, min_width, outer):
+    """When a right wall's zone and, after it, a left wall's lie between the two walls ``outer`` (the base
+    between two wells: several wells side by side, read as one), the two walls of the well nearest the field's
+    centre; else None.
+
+    The zones :func:`_zone_peaks`; the wells are the pairs next to each
+    other, not of contrary sides, at least ``min_width`` apart
+    (measured blind: three wells 40 um apart at 1.6 um/px, whose inner walls'
+    zones lie 30 px apart, within find_walls' ``min_width``, were read as one
+    well from the first's left wall to the third's right one; the flat frame
+    ok with that rim).
+    """
+    cols = _zone_peaks(col_score)
+    sides = [_wall_side(col_score, c) for c in cols]
+    inside = [s for c, s in zip(cols, sides, strict=True) if outer[0] + _RADIUS_GAP < c < outer[1] - _RADIUS_GAP]
+    if not any(a == 1 and -1 in inside[i + 1:] for i, a in enumerate(inside)):
+        return None
+    zones = list(zip(cols, sides, strict=True))
+    pairs = [(cl, cr) for (cl, sl), (cr, sr) in zip(zones[:-1], zones[1:], strict=True)
+             if sl != 1 and sr != -1 and cr - cl >= min_width]
+    if not pairs:
+        return None
     return list(min(pairs, key=lambda p: abs(0.5 * (p[0] + p[1]) - 0.5 * (width - 1))))
 
 
@@ -380,7 +455,11 @@ def neighbour_walls(maps, k, w, depth_px, strip=(0.15, 0.6), min_width=40):
     ``min_width`` px right of the right wall, of a left wall's side
     (:func:`_wall_side`), at least :data:`_WALL_SHARE` of the weaker of the
     well's own two zones, whose edge follows a straight line down the base
-    (:data:`MAX_WALL_RMS`); the nearest such one.  The same mirrored on the left.
+    (:data:`MAX_WALL_RMS`); the nearest such one; when there is none, the same
+    of the zones' peaks (:func:`_zone_peaks`) from :data:`_RADIUS_GAP` px off the wall
+    (measured blind: wells 40 um apart at 1.6 um/px, whose walls' zones lie
+    30 px apart, were not seen, and the three domes were searched as one).
+    The same mirrored on the left.
     """
     _, _, sd = maps.view(k)
     r0, r1, col_score = _zone_scores(np.rot90(maps.size, k), w.base_row, depth_px, strip)
@@ -390,23 +469,31 @@ def neighbour_walls(maps, k, w, depth_px, strip=(0.15, 0.6), min_width=40):
     m = col_score.size
     lo, hi = int(np.clip(w.left, 0, m - 1)), int(np.clip(w.right, 0, m - 1))
     own = min(col_score[lo : lo + 12].max(), col_score[max(hi - 11, 0) : hi + 1].max())  # (the zones inside the walls)
-    try:
-        peaks = _strongest(col_score, m, min_width, 2 * _WALL_CANDIDATES)
-    except ChamberNotFound:  # (fewer than two zones: the well's own at most)
-        return tuple(out)
     rows = np.arange(r0, r1).astype(float)
     strip_sd = sd[r0:r1]
-    for c in sorted(peaks, key=lambda c: min(abs(c - w.left), abs(c - w.right))):
-        right = c > w.right + min_width
-        if not (right or c < w.left - min_width) or col_score[c] < _WALL_SHARE * own:
-            continue
-        side = _wall_side(col_score, c)
-        if side != (-1 if right else 1) or np.isfinite(out[int(right)]):
-            continue
-        u = _wall_edges(strip_sd, c) if not right else m - 1 - _wall_edges(strip_sd[:, ::-1], m - 1 - c)
-        at, rms, n = _clipped_line(rows, u, float(w.base_row))
-        if n >= 5 and rms <= MAX_WALL_RMS:
-            out[int(right)] = float(at)
+    for gap in (min_width, _RADIUS_GAP):
+        if np.isfinite(out).all():
+            break
+        if gap == min_width:
+            try:
+                peaks = _strongest(col_score, m, gap, 2 * _WALL_CANDIDATES)
+            except ChamberNotFound:  # (fewer than two zones: the well's own at most)
+                return tuple(out)
+        else:
+            peaks = _zone_peaks(col_score)
+        found = [False, False]
+        for c in sorted(peaks, key=lambda c: min(abs(c - w.left), abs(c - w.right))):
+            right = c > w.right + gap
+            if not (right or c < w.left - gap) or col_score[c] < _WALL_SHARE * own:
+                continue
+            side = _wall_side(col_score, c)
+            if side != (-1 if right else 1) or np.isfinite(out[int(right)]) or found[int(right)]:
+                continue
+            u = _wall_edges(strip_sd, c) if not right else m - 1 - _wall_edges(strip_sd[:, ::-1], m - 1 - c)
+            at, rms, n = _clipped_line(rows, u, float(w.base_row))
+            if n >= 5 and rms <= MAX_WALL_RMS:
+                out[int(right)] = float(at)
+                found[int(right)] = True
     return tuple(out)
 
 

@@ -491,11 +491,24 @@ def _reference(reference_frame, first, p):
 def _silhouette_tracer(first, bulge_direction, settings, chamber, p, rim=None):
     from osmobulge.imaging._facetrace import SilhouetteTracer
 
-    l0 = depth = None
+    l0 = depth = radius = None
     if chamber is not None:
-        l0, depth = float(chamber.thickness) / p, float(chamber.depth) / p
-    return SilhouetteTracer(first, l0_px=l0, depth_px=depth, bulge_direction=bulge_direction, settings=settings,
-                            rim=rim)
+        l0, depth, radius = float(chamber.thickness) / p, float(chamber.depth) / p, float(chamber.radius) / p
+    tracer = SilhouetteTracer(first, l0_px=l0, depth_px=depth, bulge_direction=bulge_direction, settings=settings,
+                              rim=rim, radius_px=radius)
+    off = _rim_off(tracer.ref.rim_radius, chamber, p)
+    if rim is None and off > ROUTE_RIM_TOL:
+        # (measured blind: three wells 40 um apart, their inner walls' zones too close to be told apart, read as
+        # one well from the first's left wall to the third's right one, 3.3x the chamber's radius; the flat frame
+        # ok with that rim, every later frame flagged)
+        w = tracer.walls0
+        raise ChamberNotFound(
+            f"the walls found (view columns {w.left:.0f} and {w.right:.0f}, rim radius "
+            f"{tracer.ref.rim_radius * p * 1e6:.1f} um) are not this chamber's (radius "
+            f"{float(chamber.radius) * 1e6:.1f} um, more than {100 * ROUTE_RIM_TOL:.0f} % off): several wells "
+            f"side by side, or the wrong chamber; give its rim (rim=, the flat mid-line's ends at its walls) or "
+            f"crop to it")
+    return tracer
 
 
 def _tracers(first, bulge_direction, chamber_region, settings, route="band", chamber=None, p=None, rim=None):

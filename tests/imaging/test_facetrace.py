@@ -693,6 +693,36 @@ def test_a_stage_moved_past_max_drift_is_flagged_saying_how_to_follow_it(edge_da
     assert out.volume * p**3 == pytest.approx(float(edge_dark.truth.volume[2]), rel=0.03)
 
 
+def test_three_wells_40_um_apart_growing_sideways_are_read_as_three():
+    """Measured blind (1.6 um/px, the domes growing right, wells 340 um apart, 40 um of base between them): the
+    renderer lost the top face's line of a dome growing sideways (fixed), then the walls were the first well's
+    left and the third's right (the inner walls' zones 30 px apart, within find_walls' min_width): one well of
+    3.3x the radius, the flat frame ok with it.  Now the middle well, with or without the chamber's radius, the
+    neighbours' walls found, and the frame where the domes meet touching.  A chamber whose radius the walls found
+    are more than 10 % off is refused, saying so."""
+    from osmobulge.imaging.optics import Optics
+    from osmobulge.imaging.synthetic import Nuisances, SceneGeometry, render_series
+
+    p = 1.6e-6
+    s = render_series([0.0, 0.5, 1.5], lambda_pre=PRE, shape=(720, 420), chamber=(150e-6, 110e-6, 22e-6),
+                      pixel_size=p, scene=SceneGeometry(bulge_direction="right"), seed=97,
+                      optics=Optics(n_elastomer=1.42, objective_na=0.2, condenser_na=0.1, defocus=4e-6,
+                                    halo_strength=0.25),
+                      nuisances=Nuisances(noise_sigma=0.012, blur_sigma=0.6, bit_depth=12,
+                                          neighbours=((-340e-6, 0.8), (340e-6, 1.0))))
+    assert list(s.truth.flag.values) == ["ok", "ok", "touching"]
+    t = SilhouetteTracer(s.frames[0])
+    assert t.walls0.rim_radius == pytest.approx(150e-6 / p, abs=0.5) and np.all(np.isfinite(t.bounds))
+    for chamber in (None, _chamber(s.truth)):
+        ds = extract(s.frames, pixel_size=p, frame_interval=600.0, chamber=chamber, progress=False)
+        sc = score(s.truth, ds)
+        assert list(ds.flag.values) == ["ok", "ok", "touching"] and sc["n_silent"] == 0
+        assert np.all(sc["dv_tol"][:2] <= 1.0) and np.all(np.abs(sc["rim_bias_px"]) < 0.5), sc
+    wide = Chamber(200e-6, 110e-6, 22e-6, 3000.0)
+    with pytest.raises(ChamberNotFound, match=r"rim radius 150.\d um\) are not this chamber's \(radius 200.0 um"):
+        extract(s.frames, pixel_size=p, frame_interval=600.0, chamber=wide, progress=False, tracer="silhouette")
+
+
 def test_a_dome_past_the_half_way_column_is_measured_until_the_domes_meet():
     """ho_blind_1206c: this dome, larger than its neighbour's, passes the column half-way to the neighbour's well
     while the neighbour's dome is still far (the search stopped there and the frames were flagged touching 4

@@ -397,3 +397,28 @@ def test_the_wall_pair_is_one_wells_not_the_base_between_two_wells():
     # two zones facing away from each other and nothing else: refused, not paired
     with pytest.raises(ChamberNotFound, match="side by side"):
         _wall_pair(2.0 * (_zone(x, 300.0, 1) + _zone(x, 700.0, -1)), x.size, 40)
+
+
+def test_wells_side_by_side_closer_than_min_width_are_not_read_as_one():
+    """Three wells whose walls between them are 30 px thick (wells 40 um apart at 1.6 um/px), each wall's zone of
+    one strength: find_walls' min_width (40 px) merges each pair of inner zones, and the two strongest were the
+    first well's left wall and the third's right one (measured blind: one well of 3.3x the radius, the flat frame
+    ok with that rim).  A right wall's zone followed by a left one between them is the base between two wells:
+    the pair is the well nearest the field's centre; with the radius known, the pair of that radius."""
+    x = np.arange(1024.0)
+    walls = [(208.0, -1), (391.0, 1), (421.0, -1), (603.0, 1), (633.0, -1), (816.0, 1)]
+    score = 2.0 * sum((1.0 if k in (0, 5) else 0.98) * _zone(x, c, side) for k, (c, side) in enumerate(walls))
+    assert sorted(_strongest(score, x.size, 40)) == [pytest.approx(208, abs=4), pytest.approx(816, abs=4)]
+    left, right = _wall_pair(score, x.size, 40)
+    assert abs(left - 421) <= 4 and abs(right - 603) <= 4
+    # two left walls' zones, then two right ones (no base between two wells between the strongest): the zones
+    # alone take the outer two; the radius (91 px) the pair of it
+    odd = 2.0 * (_zone(x, 100.0, -1) + 0.95 * _zone(x, 300.0, -1) + 0.95 * _zone(x, 482.0, 1) + _zone(x, 900.0, 1))
+    left, right = _wall_pair(odd, x.size, 40)
+    assert abs(left - 100) <= 4 and abs(right - 900) <= 4
+    left, right = _wall_pair(odd, x.size, 40, radius_px=91.0)
+    assert abs(left - 300) <= 4 and abs(right - 482) <= 4
+    # one well alone (no zones between its walls): as before, with or without its radius
+    one = 2.0 * (_zone(x, 300.0, -1) + _zone(x, 700.0, 1))
+    pair = _wall_pair(one, x.size, 40)
+    assert pair == _wall_pair(one, x.size, 40, radius_px=200.0) and abs(pair[0] - 300) <= 4 and abs(pair[1] - 700) <= 4
