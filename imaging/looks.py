@@ -259,6 +259,19 @@ HELD_OUT_LOOKS: dict[str, Look] = {
         replace(_N, noise_sigma=0.01, blur_sigma=0.7, vignetting=0.1, drift_sigma=0.3, bit_depth=12),
         chamber=(170e-6, 110e-6, 21e-6), pixel_size=0.85e-6, seed=94,
     ),
+    # added 2026-12-06 (sixteenth), measured once, blind: three wells 340 um apart (40 um of base between them) at
+    # 1.6 um/px, the domes growing right: the renderer had lost the top face's line of a sideways dome (mended:
+    # optics.render_optical), then the walls read were the first well's left and the third's right (the inner
+    # walls' zones 30 px apart): one well of 3.3x the radius, the flat frame ok with it, every later frame
+    # flagged.  The wells between the two strongest zones, the chamber's radius and the neighbours' walls down to
+    # 8 px followed: 9 ok, 1 low dome, 2 touching before the bands meet (5.6 and 0.5 px apart), the 13 touching
+    # frames flagged, 0 silent, worst 0.12, rim within 0.11 px; no longer blind
+    "ho_blind_1206p": Look(
+        Optics(n_elastomer=1.42, objective_na=0.2, condenser_na=0.1, defocus=4e-6, halo_strength=0.25),
+        replace(_N, noise_sigma=0.012, blur_sigma=0.6, drift_sigma=0.4, dust_count=12, bit_depth=12,
+                neighbours=((-340e-6, 0.8), (340e-6, 1.0))),
+        chamber=(150e-6, 110e-6, 22e-6), pixel_size=1.6e-6, seed=97, scene=SceneGeometry(bulge_direction="right"),
+    ),
 }
 
 
