@@ -481,19 +481,17 @@ def neighbour_walls(maps, k, w, depth_px, strip=(0.15, 0.6), min_width=40):
                 return tuple(out)
         else:
             peaks = _zone_peaks(col_score)
-        found = [False, False]
         for c in sorted(peaks, key=lambda c: min(abs(c - w.left), abs(c - w.right))):
             right = c > w.right + gap
             if not (right or c < w.left - gap) or col_score[c] < _WALL_SHARE * own:
                 continue
             side = _wall_side(col_score, c)
-            if side != (-1 if right else 1) or np.isfinite(out[int(right)]) or found[int(right)]:
+            if side != (-1 if right else 1) or np.isfinite(out[int(right)]):
                 continue
             u = _wall_edges(strip_sd, c) if not right else m - 1 - _wall_edges(strip_sd[:, ::-1], m - 1 - c)
             at, rms, n = _clipped_line(rows, u, float(w.base_row))
             if n >= 5 and rms <= MAX_WALL_RMS:
                 out[int(right)] = float(at)
-                found[int(right)] = True
     return tuple(out)
 
 
