@@ -919,7 +919,8 @@ class SilhouetteTracer:
         face's own change (over 10x the noise), the first change over 10x the
         noise not on a speck of the flat frame is the neighbour's dome; the
         gap is its offset, a running median over ``_GAP_ROWS`` rows, least over
-        the rows (inf when none is seen); 0 where the two changes merge.  On
+        the rows (when none is seen, the least length scanned); 0 where the two
+        changes merge.  On
         rows where nothing is seen half-way is taken to the scan's end, never
         nearer than :attr:`bounds`; the other rows keep :attr:`bounds`.
         """
@@ -960,7 +961,10 @@ class SilhouetteTracer:
         mid = np.where(np.isfinite(g), mid, side * np.maximum(side * mid, side * (self.bounds[j] + dx)))
         # (on the first frame's rows; the rows outside the scanned ones keep the half-way column)
         out = np.interp(np.arange(n_rows) + dy, rows, mid, left=self.bounds[j] + dx, right=self.bounds[j] + dx) - dx
-        return float(np.min(g)) if g.size else np.inf, out
+        least = float(np.min(g)) if g.size else np.inf
+        if not np.isfinite(least) and length.size:  # (nothing seen up to the wall or the reach: at least that far)
+            least = float(np.min(length))
+        return least, out
 
     def _change(self, frame, points, directions, offsets, dx, dy):
         """The change (this frame minus the first frame moved by the drift, over the local light) along
