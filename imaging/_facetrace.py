@@ -134,10 +134,10 @@ _WALL_INSIDE = 26
 #: rows of the base the walls are followed down, as fractions of the well depth (more rows than
 #: find_walls' default, which must also work with a guessed depth)
 _STRIP = (0.1, 0.8)
-#: the flat frame's specks (dust fixed to the camera) within _SPECK_PX px of the column half-way to a neighbour,
-#: moved by the drift, are not a dome's face on it; they are looked for within _SPECK_WINDOW px of it (measured:
-#: 40 specks and drift 1 px a frame flagged every frame touching without this)
-_SPECK_PX, _SPECK_WINDOW = 8, 48
+#: the flat frame's specks (dust fixed to the camera) within _SPECK_PX px, plus the drift, of a point are not a
+#: dome's face there (:meth:`SilhouetteTracer._clear_of_specks`; measured: 40 specks and drift 1 px a frame flagged
+#: every frame touching without this)
+_SPECK_PX = 8
 #: a dome within _NEAR_PX px of the column half-way to a neighbouring well has its gap to the neighbour's dome
 #: measured row by row (:meth:`_gap_rows`), each row's a running median over _GAP_ROWS rows (a speck a few rows
 #: high is not a face); the next frame's dome is then searched for up to the middle of that gap on each row
@@ -416,22 +416,6 @@ def _mad(v):
     return 1.4826 * median(np.abs(v - median(v)))
 
 
-def _speck_distance(sd, col):
-    """Per row of ``sd`` (the flat frame's signed deviation above the top face), the distance (px) from column ``col``
-    to the nearest speck within ``_SPECK_WINDOW`` px of it (a value more than 6 scaled MADs off the window's
-    median), inf where there is none or ``col`` is not in the frame."""
-    out = np.full(sd.shape[0], np.inf)
-    if not np.isfinite(col) or sd.shape[0] == 0:
-        return out
-    c0, c1 = max(int(col) - _SPECK_WINDOW, 0), min(int(col) + _SPECK_WINDOW + 1, sd.shape[1])
-    if c1 <= c0:
-        return out
-    dev = np.abs(sd[:, c0:c1] - median(sd[:, c0:c1]))
-    speck = dev > 6.0 * max(1.4826 * median(dev), 1e-12)  # (6 scaled MADs, :func:`_mad`)
-    dist = np.where(speck, np.abs(np.arange(c0, c1) - col)[None, :], np.inf)
-    return dist.min(axis=1)
-
-
 def _speck_map(sd):
     """Per pixel of ``sd`` (the flat frame's signed deviation above the top face), the distance (px) to the
     nearest speck (a value more than 6 scaled MADs off its row's median), inf without any."""
@@ -657,7 +641,6 @@ class SilhouetteTracer:
         self._lim_next = None  # (this frame's measured ones, for the next frame)
         if self.bounds is not None:  # (the flat frame's specks beside those columns, :meth:`_neighbour_gap`)
             sd = np.rot90(maps.deviation, self.k)[: max(int(w.top_row), 1)]
-            self._specks = tuple(_speck_distance(sd, b) for b in self.bounds)
             self._speck_map = _speck_map(sd)
         self._rim0 = (w.axis_col - w.left, w.right - w.axis_col)  # the film's material rim radii (:func:`_thickness`)
         self.polarity = 0  # the dome's sign (+1 darker than the water), from the first frame showing it
@@ -902,12 +885,16 @@ class SilhouetteTracer:
         if not (rows.size and 0.0 <= b + dx < self.view_shape[1] - 1):
             return False
         v = sample(np.array([[b + dx, rows[0]]]), np.array([[0.0, -1.0]]), rows[0] - rows, own=False)[0]
-        near = self._specks[int(side > 0)]
-        reach = int(abs(dy)) + _SPECK_PX
-        near = ndimage.minimum_filter1d(near, 2 * reach + 1, mode="nearest")
-        idx = np.clip(np.round(rows).astype(int), 0, near.size - 1)
-        clear = near[idx] > abs(dx) + _SPECK_PX
+        clear = self._clear_of_specks(rows, np.full(rows.shape, b + dx), dx, dy)
         return bool(np.any(clear & (np.abs(v) > 10.0 * noise)))
+
+    def _clear_of_specks(self, rows, cols, dx, dy):
+        """Whether view points (this frame) lie farther from the flat frame's specks (dust fixed to the camera:
+        the change shows them where they are and moved by the drift) than the drift and ``_SPECK_PX``."""
+        m = self._speck_map
+        rr = np.clip(np.rint(rows - dy), 0, m.shape[0] - 1).astype(np.intp)
+        cc = np.clip(np.rint(cols - dx), 0, m.shape[1] - 1).astype(np.intp)
+        return m[rr, cc] > np.hypot(dx, dy) + _SPECK_PX
 
     def _gap_rows(self, sample, w, u, z, side, dx, dy, noise):
         """The gap (px) between the dome's outer face (points ``(u, z)``) and the neighbouring dome on side
@@ -944,11 +931,7 @@ class SilhouetteTracer:
         offs = np.arange(0.0, max(float(length.max()), 1.0), 1.0)
         v = sample(np.column_stack((start, rows)), np.tile([side, 0.0], (rows.size, 1)), offs, own=False)
         loud = np.abs(v) > 10.0 * noise
-        # (not the flat frame's specks, fixed to the camera: the change shows them where they are and moved by the
-        # drift)
-        cc = np.clip(np.rint(start[:, None] + side * offs[None, :] - dx), 0, self._speck_map.shape[1] - 1)
-        rr = np.clip(np.rint(rows[:, None] - dy), 0, self._speck_map.shape[0] - 1)
-        loud &= self._speck_map[rr.astype(np.intp), cc.astype(np.intp)] > np.hypot(dx, dy) + _SPECK_PX
+        loud &= self._clear_of_specks(rows[:, None], start[:, None] + side * offs[None, :], dx, dy)
         inside = offs[None, :] < length[:, None]
         loud &= inside
         quiet = np.argmax(~loud, axis=1)  # (past the face's own change)

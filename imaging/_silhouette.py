@@ -350,6 +350,15 @@ _WALL_CANDIDATES, _WALL_SHARE = 6, 0.5
 _RADIUS_TOL, _RADIUS_GAP = 0.15, 8
 
 
+def _central_pair(cols, sides, width, fits=lambda cl, cr: True):
+    """Of the zones at columns ``cols`` (left to right, their sides ``sides``: :func:`_wall_side`), the two next to
+    each other, not of contrary sides, for which ``fits(cl, cr)``, whose middle is nearest the field's centre, as
+    ``[left, right]``; None if there are none."""
+    pairs = [(cl, cr) for cl, sl, cr, sr in zip(cols[:-1], sides[:-1], cols[1:], sides[1:], strict=True)
+             if sl != 1 and sr != -1 and fits(cl, cr)]
+    return list(min(pairs, key=lambda p: abs(0.5 * (p[0] + p[1]) - 0.5 * (width - 1)))) if pairs else None
+
+
 def _wall_pair(col_score, width, min_width, radius_px=None):
     """The columns of the two walls of the well nearest the field's centre (of the chamber's radius, when
     ``radius_px`` is given and the pair :func:`_zone_pair` finds is not of it).
@@ -370,11 +379,10 @@ def _wall_pair(col_score, width, min_width, radius_px=None):
             raise err
         return pair
     peaks = _zone_peaks(col_score)
-    sides = {c: _wall_side(col_score, c) for c in peaks}
-    fits = [(cl, cr) for cl, cr in zip(peaks[:-1], peaks[1:], strict=True)
-            if sides[cl] != 1 and sides[cr] != -1 and abs(0.5 * (cr - cl) / radius_px - 1.0) <= _RADIUS_TOL]
-    if fits:
-        return list(min(fits, key=lambda p: abs(0.5 * (p[0] + p[1]) - 0.5 * (width - 1))))
+    fit = _central_pair(peaks, [_wall_side(col_score, c) for c in peaks], width,
+                        lambda cl, cr: abs(0.5 * (cr - cl) / radius_px - 1.0) <= _RADIUS_TOL)
+    if fit is not None:
+        return fit
     if pair is None:
         raise err
     return pair
@@ -403,11 +411,11 @@ def _zone_pair(col_score, width, min_width):
         inner = _wells_between(col_score, width, min_width, first)
         return first if inner is None else inner
     cols = sorted(peaks)
-    pairs = [(cl, cr) for cl, cr in zip(cols[:-1], cols[1:], strict=True) if sides[cl] != 1 and sides[cr] != -1]
-    if not pairs:
+    pair = _central_pair(cols, [sides[c] for c in cols], width)
+    if pair is None:
         raise ChamberNotFound(f"no left and right wall silhouette of one well side by side in the base below the "
                               f"membrane (zones at columns {', '.join(map(str, cols))})")
-    return list(min(pairs, key=lambda p: abs(0.5 * (p[0] + p[1]) - 0.5 * (width - 1))))
+    return pair
 
 
 def _zone_peaks(col_score):
@@ -438,12 +446,7 @@ def _wells_between(col_score, width, min_width, outer):
     inside = [s for c, s in zip(cols, sides, strict=True) if outer[0] + _RADIUS_GAP < c < outer[1] - _RADIUS_GAP]
     if not any(a == 1 and -1 in inside[i + 1:] for i, a in enumerate(inside)):
         return None
-    zones = list(zip(cols, sides, strict=True))
-    pairs = [(cl, cr) for (cl, sl), (cr, sr) in zip(zones[:-1], zones[1:], strict=True)
-             if sl != 1 and sr != -1 and cr - cl >= min_width]
-    if not pairs:
-        return None
-    return list(min(pairs, key=lambda p: abs(0.5 * (p[0] + p[1]) - 0.5 * (width - 1))))
+    return _central_pair(cols, sides, width, lambda cl, cr: cr - cl >= min_width)
 
 
 def neighbour_walls(maps, k, w, depth_px, strip=(0.15, 0.6), min_width=40):

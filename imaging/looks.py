@@ -205,7 +205,7 @@ HELD_OUT_LOOKS: dict[str, Look] = {
     # once, blind: refused ("no well bottom below the walls": the well's bottom was compared with the median of the
     # field's other columns, most of them the neighbours' wells, whose bottoms lie on the same row); with the bottom
     # compared with the base beside the walls, every frame touching (specks fixed to the camera, on the column
-    # half-way to a neighbour, moved by the drift).  Both followed (SilhouetteTracer._depth, _speck_distance):
+    # half-way to a neighbour, moved by the drift).  Both followed (SilhouetteTracer._depth, _clear_of_specks):
     # 19 ok, the last 6 touching, 0 silent, worst 0.27 of the tolerance; no longer blind
     "ho_blind_1206k": Look(
         Optics(n_elastomer=1.418, objective_na=0.25, condenser_na=0.12, defocus=3e-6, halo_strength=0.2),
