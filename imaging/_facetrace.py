@@ -421,7 +421,7 @@ def _speck_map(sd, clipped):
     nearest speck (a value more than 6 scaled MADs off its row's median), inf without any.
 
     The scaled MAD is that of the pixels not ``clipped`` (at the frame's
-    least or greatest value): in water exposed past full scale most pixels
+    greatest value, full scale): in water exposed past full scale most pixels
     sit at the ceiling, the MAD of all of them is about 0 and every pixel the
     noise takes below the ceiling was a speck (measured on ho_blind_1206q:
     27 % of the pixels, the neighbour's dome not seen 12 px off, the gap
@@ -654,7 +654,7 @@ class SilhouetteTracer:
             top = max(int(w.top_row), 1)
             v = np.rot90(maps.values, self.k)[:top]
             self._speck_map = _speck_map(np.rot90(maps.deviation, self.k)[:top],
-                                         (v == maps.values.min()) | (v == maps.values.max()))
+                                         v == maps.values.max())
         self._rim0 = (w.axis_col - w.left, w.right - w.axis_col)  # the film's material rim radii (:func:`_thickness`)
         self.polarity = 0  # the dome's sign (+1 darker than the water), from the first frame showing it
         self.shape = frame.shape
