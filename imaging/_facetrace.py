@@ -69,7 +69,14 @@ from osmobulge.imaging._kernels import (
 )
 from osmobulge.imaging._silhouette import FlatMaps, find_walls, neighbour_walls
 from osmobulge.imaging.geometry import revolution_measures, smooth_profile
-from osmobulge.imaging.trace import FrameTrace, TraceSettings, first_flag, manual_curve
+from osmobulge.imaging.trace import (
+    FIELD_MARGIN_PX,
+    FrameTrace,
+    TraceSettings,
+    field_edge_message,
+    first_flag,
+    manual_curve,
+)
 
 __all__ = ["SilhouetteTracer"]
 
@@ -124,8 +131,6 @@ _FOOT_PX, _LOW_DOME_PX = 4.0, 8.0
 #: thickness (px, or this fraction of it) before every frame is flagged poor_fit (figure flat_film): the top
 #: face (the mid plane every height is measured from) is then in doubt
 _FILM_TOL_PX, _FILM_TOL = 1.0, 0.05
-#: closest approach (px) of the dome to the field's edge before a frame is poor_fit (field_margin)
-_FIELD_MARGIN_PX = 3.0
 #: columns beside the walls kept when a later frame's walls are found (their zone is inside the well, the light
 #: just outside them 4-12 px out; find_walls looks for them within 20 px of the expected columns)
 _WALL_MARGIN = 40
@@ -667,6 +672,7 @@ class SilhouetteTracer:
         self._reg_rows = (int(np.ceil(w.base_row + 5)), min(int(w.base_row + self.depth) + 40, img.shape[0]))
         self._reg_ref = tuple(_Shift1D(p) for p in _profiles(img[slice(*self._reg_rows)]))
         self.prev = None
+        self._edge_reached = (None, np.inf)  # the last frame with a dome and its margin to the field's edge, px
         self._track = None  # the last ok frames' outer faces (u, z), px (one or two)
         self._curves = None  # and their curves with the feet at the rim (:class:`_Polyline`, :meth:`_finish`)
         self._splines = []  # the splines of the track's curves (:meth:`_spline`)
@@ -831,7 +837,12 @@ class SilhouetteTracer:
         if u is None:  # no dome: flat (the film unchanged) or gone
             self._track = self._curves = None
             out = self._flat_or_gone(sample, w, noise, g, out)
-            if out.flag == "ok" and self.prev is not None and self.prev.height > _LOW_DOME_PX:
+            last, margin = self._edge_reached
+            if margin < FIELD_MARGIN_PX:  # (a dome does not shrink: it grew on out of the field)
+                out.message = f"no dome edge found: {field_edge_message(margin, last)}"
+                out.figures["field_margin"] = margin
+                out.flag, out.flag_figure, out.flag_value = "poor_fit", "field_margin", margin
+            elif out.flag == "ok" and self.prev is not None and self.prev.height > _LOW_DOME_PX:
                 # a dome does not fall flat between frames: its edge was not seen (measured on ho_blind_1206d:
                 # domes over most of the noise's rows, a dyed liquid inside them, raised the noise until the
                 # dome's contrast fell below 10 of it; such frames read flat and ok, 33x the tolerance)
@@ -839,6 +850,7 @@ class SilhouetteTracer:
                                f"where frame {self.prev.index} had a dome {self.prev.height:.0f} px high")
                 out.flag, out.flag_figure, out.flag_value = "poor_fit", "dome_contrast", out.figures["dome_contrast"]
             return out
+        self._edge_reached = (index, figs.get("field_margin", np.inf))
         if self.bounds is None:
             return self._finish(u, z, w, g, out)
         self._lim_next = None
@@ -1221,6 +1233,8 @@ class SilhouetteTracer:
                             "volume_disagreement": float(abs(m.volume_left - m.volume_right) /
                                                          max(abs(m.volume), floor))})
         out.flag, out.flag_figure, out.flag_value = self._flag(out.figures)
+        if out.flag_figure == "field_margin":
+            out.message = field_edge_message(out.flag_value)
         out.ok, out.mode = True, "silhouette"
         if out.flag == "ok":
             self.prev = out
@@ -1240,10 +1254,11 @@ class SilhouetteTracer:
         st = self.settings
         fig.setdefault("flat_film", self.film_mismatch)
         checks = [
+            # (first: a stretch of the dome outside the frame is no tear, and a neighbour is not seen there)
+            ("poor_fit", "field_margin", fig.get("field_margin", np.inf) < FIELD_MARGIN_PX),
             ("touching", "neighbour_gap", fig.get("neighbour_gap", np.inf) < st.touching_flag),
             ("fractured", "gap_length", fig.get("gap_length", 0.0) > st.gap_flag),
             ("poor_fit", "flat_film", self.film_mismatch > max(_FILM_TOL_PX, _FILM_TOL * self.l0)),
-            ("poor_fit", "field_margin", fig.get("field_margin", np.inf) < _FIELD_MARGIN_PX),
             ("poor_fit", "low_dome", fig.get("low_dome", np.inf) < _LOW_DOME_PX),
             ("poor_fit", "edge_lost", fig.get("edge_lost", 0.0) > _LOST_FLAG),
             ("poor_fit", "edge_jumps", fig.get("edge_jumps", 0.0) > _JUMP_FLAG),

@@ -215,6 +215,22 @@ class FrameTrace:
 
 
 # ---------------------------------------------------------------------------------- helpers
+#: closest approach (px) of the dome to the field's edge below which a frame is poor_fit (``field_margin``): part
+#: of the dome may lie outside the frame (measured on a dome growing out of the top of the field, both routes:
+#: the stretch outside was read as a tear, ``fractured``, and once the dome was mostly out as ``no_membrane``)
+FIELD_MARGIN_PX = 3.0
+
+
+def field_edge_message(margin, index=None):
+    """What a frame flagged by ``field_margin`` says (``index``: the frame whose dome reached the edge, when an
+    earlier one)."""
+    whose, verb = ("the dome", "comes") if index is None else (f"frame {index}'s dome", "came")
+    where = (f"{verb} within {margin:.1f} px of the field's edge" if margin >= 0.0 else
+             f"{'runs' if index is None else 'ran'} {-margin:.0f} px past the field's edge")
+    return (f"{whose} {where}: part of it may lie outside the frame and is not measured; keep the dome in view (a "
+            "larger field of view or lower magnification, the chamber nearer the field's centre)")
+
+
 def first_flag(checks, fig):
     """``(flag, figure, value)`` of the first ``(flag, figure, hit)`` check that hits, else ``("ok", "", nan)``."""
     for name, key, hit in checks:
@@ -285,6 +301,7 @@ class ChamberTracer:
         self._drift = np.zeros(2)  # (dx, dy) of the current frame w.r.t. the first, view px
         self.prev = None  # last good FrameTrace
         self._prev2 = None  # the good one before it (for the motion prediction)
+        self._edge_reached = (None, np.inf)  # the last traced frame and its dome's margin to the field's edge, px
         self._motion = self.settings.search  # px, last frame-to-frame motion of the dome
         self._band = np.nan  # px, the last good dome's band width (90th percentile over its stations)
         self._tracking = False  # the last frame processed was good: start from its geometry
@@ -890,6 +907,8 @@ class ChamberTracer:
         dome = ~excl
         ref = tr["ref_contrast"]
         fig["dome_contrast"] = float(self._dome_median(tr) / ref) if dome.any() and ref > 0 else 0.0
+        # the dome reaching the field's edge (part of it outside the frame)
+        fig["field_margin"] = self._field_margin(view, g, tr)
         # gaps: stations whose band contrast drops well below the dome's own (a running 80th percentile
         # along the curve: the thin pole is fainter than the rims) and into the noise
         fig["gap_length"] = float(low_contrast_run(np.ascontiguousarray(con, np.float64), dome, ds,
@@ -906,11 +925,21 @@ class ChamberTracer:
         fig["residual_rms"] = tr["residual_rms"]
         return fig
 
+    @staticmethod
+    def _extent(g, tr):
+        """The traced curve's largest distance from the axis (px) and its least and greatest column and least row
+        (view)."""
+        return curve_extent(np.ascontiguousarray(tr["u"], np.float64), np.ascontiguousarray(tr["z"], np.float64),
+                            float(g.line.x0), float(g.line.y0), *g.line._dn)
+
+    def _field_margin(self, view, g, tr):
+        """The traced curve's closest approach (px) to the field's edge (< 0: beyond it)."""
+        _, xmin, xmax, ymin = self._extent(g, tr)
+        return float(min(xmin, view.shape[1] - 1 - xmax, ymin))
+
     def _neighbour_possible(self, view, g, tr):
         """Could another bulge reach the dome?  A well within reach, or the dome near the field's edge."""
-        umax, xmin, xmax, ymin = curve_extent(np.ascontiguousarray(tr["u"], np.float64),
-                                              np.ascontiguousarray(tr["z"], np.float64), float(g.line.x0),
-                                              float(g.line.y0), *g.line._dn)
+        umax, xmin, xmax, ymin = self._extent(g, tr)
         reach = umax + 2.5 * g.rim_radius
         if any(min(abs(wl.u_left), abs(wl.u_right)) < reach for wl in g.others):
             return True
@@ -1000,6 +1029,7 @@ class ChamberTracer:
         st = self.settings
         checks = [
             ("no_membrane", "dome_contrast", fig["dome_contrast"] < st.min_contrast),
+            ("poor_fit", "field_margin", fig.get("field_margin", np.inf) < FIELD_MARGIN_PX),
             ("delaminated", "rim_contact", fig["rim_contact"] < st.delamination_flag),
             ("fractured", "gap_length", fig["gap_length"] > st.gap_flag),
             ("touching", "neighbour_gap", fig["neighbour_gap"] < st.touching_flag),
@@ -1064,7 +1094,12 @@ class ChamberTracer:
         if tr is None:
             out.message = "no dome traced"
             out.figures = {"dome_contrast": 0.0, "well_membrane": self._well_membrane(view, g)}
-            if out.figures["well_membrane"] > self.settings.well_membrane_flag:
+            last, margin = self._edge_reached
+            if margin < FIELD_MARGIN_PX:  # (a dome does not shrink: it grew on out of the field)
+                out.message = f"no dome traced: {field_edge_message(margin, last)}"
+                out.figures["field_margin"] = margin
+                out.flag, out.flag_figure, out.flag_value = "poor_fit", "field_margin", margin
+            elif out.figures["well_membrane"] > self.settings.well_membrane_flag:
                 out.flag, out.flag_figure = "fractured", "well_membrane"
                 out.flag_value = out.figures["well_membrane"]
             else:
@@ -1090,6 +1125,9 @@ class ChamberTracer:
         fig["volume_disagreement"] = out.figures.get("volume_disagreement", np.nan)
         out.figures.update(fig)
         out.flag, out.flag_figure, out.flag_value = self._flag(out.figures)
+        if out.flag_figure == "field_margin":
+            out.message = field_edge_message(out.flag_value)
+        self._edge_reached = (out.index, out.figures["field_margin"])
         out.ok = True
         out.mode = tr["mode"]
 

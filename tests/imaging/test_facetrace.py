@@ -788,6 +788,32 @@ def test_a_neighbours_dome_is_seen_in_saturated_water():
     assert np.all(sc["dv_tol"] <= 1.0), sc["dv_tol"]
 
 
+@pytest.mark.parametrize("route", ["silhouette", "band"])
+def test_a_dome_grown_out_of_the_field_is_flagged_as_such(route):
+    """A dome growing out of the top of the field (the renderer warns): measured blind, both routes read the
+    stretch outside the frame as a tear (fractured, gap_length) and the band route, once the dome was mostly out,
+    found no membrane.  Those frames are poor_fit (field_margin) saying the dome left the field, and the frames
+    before are ok and within tolerance."""
+    from osmobulge.imaging.optics import Optics
+    from osmobulge.imaging.synthetic import Nuisances, SceneGeometry, render_series
+
+    p = 0.8e-6
+    optics = Optics(n_elastomer=1.418, objective_na=0.25, condenser_na=0.12, defocus=3e-6, halo_strength=0.2)
+    with pytest.warns(UserWarning, match="the dome leaves the field from frame 2 on"):
+        s = render_series([0.0, 0.92, 1.98, 3.27], lambda_pre=PRE, shape=(700, 700),
+                          chamber=(150e-6, 110e-6, 22e-6), pixel_size=p, seed=111,
+                          optics=optics if route == "silhouette" else None,
+                          nuisances=Nuisances(noise_sigma=0.01, blur_sigma=0.7, drift_sigma=0.3, bit_depth=12),
+                          scene=SceneGeometry(axis_position=(350.0, 300.0)))
+    ds = _extract(s, tracer=route)
+    sc = score(s.truth, ds)
+    assert ds.attrs["tracer"] == route
+    assert list(ds.flag.values) == ["ok", "ok", "poor_fit", "poor_fit"], list(ds.flag_figure.values)
+    assert list(ds.flag_figure.values[2:]) == ["field_margin"] * 2
+    assert np.all(ds.flag_value.values[2:] < 3.0) and np.all(sc["dv_tol"][:2] <= 1.0), sc["dv_tol"]
+    assert all("the field's edge: part of it may lie outside" in str(m) for m in ds.message.values[2:])
+
+
 def test_a_dome_that_reads_flat_after_a_dome_is_flagged(edge_dark):
     """A dome does not fall flat between two frames: a frame without a dome edge after an ok frame with a dome
     is flagged (its contrast), not measured flat.  Measured blind on ho_blind_1206d (neighbours both sides whose
