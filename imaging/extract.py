@@ -641,6 +641,35 @@ def _warn_if_band_stays_flat(run, p, where):
                       f"checks the band's rim against its radius) or tracer='silhouette'", UserWarning, stacklevel=3)
 
 
+#: share of a flagged frame's pixels at its most common value, beyond the first frame's, that names it a blank or
+#: partial frame in its message (a transfer cut short, the shutter, the lamp)
+BLANK_SHARE = 0.2
+
+
+def _mode_share(frame):
+    """The most common value of a frame and the share of its pixels at it."""
+    f = np.asarray(frame).ravel()
+    if f.dtype.kind == "u" and f.dtype.itemsize <= 2:
+        counts = np.bincount(f)
+        k = int(np.argmax(counts))
+        return k, counts[k] / f.size
+    values, counts = np.unique(f, return_counts=True)
+    k = int(np.argmax(counts))
+    return values[k].item(), counts[k] / f.size
+
+
+def _blank_note(frame, first_share):
+    """What a flagged frame's message starts with when most of it is one value, more than the first frame was
+    (measured: a black frame, a white one and a frame black in its top half read as chamber walls not found or
+    as a dome past the field's edge); else ''."""
+    value, share = _mode_share(frame)
+    if share - first_share <= BLANK_SHARE:
+        return ""
+    what = "blank (every pixel" if share == 1.0 else f"partly blank ({100 * share:.0f} % of its pixels"
+    return (f"the frame is {what} {value}; the first frame's most common value, {100 * first_share:.0f} %): a "
+            "transfer cut short, the shutter or the lamp? ")
+
+
 class _Run:
     """One chamber's tracer and per-frame storage (memory flat in T: scalars and fixed-length profiles)."""
 
@@ -658,6 +687,7 @@ class _Run:
         self.px, self.pz, self.pcol, self.prow = (np.full((n, n_profile), np.nan) for _ in range(4))
         self.plen = np.full(n, np.nan)
         self.prior_frames = np.array(sorted(priors), int)
+        self.first_share = None  # (the first frame's pixels' share at its most common value: _blank_note)
 
     def guide_for(self, i):
         if i in self.priors:
@@ -677,6 +707,10 @@ class _Run:
         try:
             man = self.manual.get(i)
             res = self.tracer.process(frame, i, guide=None if man is not None else self.guide_for(i), manual=man)
+            if self.first_share is None:
+                self.first_share = _mode_share(frame)[1]
+            if res.flag != "ok":
+                res.message = _blank_note(frame, self.first_share) + res.message
             if res.geometry is None and errors == "raise":
                 raise RuntimeError(f"frame {i} cannot be measured: {res.message}")
         except Exception as err:  # noqa: BLE001 - batch runs record failures as data

@@ -224,11 +224,12 @@ FIELD_MARGIN_PX = 3.0
 def field_edge_message(margin, index=None):
     """What a frame flagged by ``field_margin`` says (``index``: the frame whose dome reached the edge, when an
     earlier one)."""
-    whose, verb = ("the dome", "comes") if index is None else (f"frame {index}'s dome", "came")
+    whose, verb = ("the traced dome", "comes") if index is None else (f"frame {index}'s traced dome", "came")
     where = (f"{verb} within {margin:.1f} px of the field's edge" if margin >= 0.0 else
              f"{'runs' if index is None else 'ran'} {-margin:.0f} px past the field's edge")
-    return (f"{whose} {where}: part of it may lie outside the frame and is not measured; keep the dome in view (a "
-            "larger field of view or lower magnification, the chamber nearer the field's centre)")
+    return (f"{whose} {where}: the dome may have grown out of the field, not measured there (keep it in view: a "
+            "larger field of view or lower magnification, the chamber nearer the field's centre), or the trace "
+            "is not the dome's")
 
 
 def first_flag(checks, fig):

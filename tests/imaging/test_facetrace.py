@@ -811,7 +811,22 @@ def test_a_dome_grown_out_of_the_field_is_flagged_as_such(route):
     assert list(ds.flag.values) == ["ok", "ok", "poor_fit", "poor_fit"], list(ds.flag_figure.values)
     assert list(ds.flag_figure.values[2:]) == ["field_margin"] * 2
     assert np.all(ds.flag_value.values[2:] < 3.0) and np.all(sc["dv_tol"][:2] <= 1.0), sc["dv_tol"]
-    assert all("the field's edge: part of it may lie outside" in str(m) for m in ds.message.values[2:])
+    assert all("the field's edge: the dome may have grown out of the field" in str(m) for m in ds.message.values[2:])
+
+
+def test_a_blank_or_partly_blank_frame_says_so(edge_dark):
+    """A camera's blank frames mid-series (measured: black and white frames read as chamber walls not found, no
+    word of the image): a flagged frame mostly at one value, more than the first frame, says so first."""
+    f0 = np.asarray(edge_dark.frames[0])
+    cut = np.array(edge_dark.frames[3])
+    cut[:585] = 0  # (a transfer cut short: the top 68 % black)
+    f = np.stack([f0, edge_dark.frames[1], np.zeros_like(f0), np.full_like(f0, np.iinfo(f0.dtype).max), cut])
+    ds = _extract(edge_dark.__class__(f, edge_dark.truth))  # (the truth's attrs: the chamber)
+    assert list(ds.flag.values[:2]) == ["ok", "ok"] and all(ds.flag.values[2:] != "ok")
+    assert list(ds.message.values[:2]) == ["", ""]
+    assert str(ds.message.values[2]).startswith("the frame is blank (every pixel 0;")
+    assert str(ds.message.values[3]).startswith("the frame is blank (every pixel 65535;")
+    assert str(ds.message.values[4]).startswith("the frame is partly blank (68 % of its pixels 0;")
 
 
 def test_a_dome_that_reads_flat_after_a_dome_is_flagged(edge_dark):
