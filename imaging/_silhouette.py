@@ -383,9 +383,30 @@ def _wall_pair(col_score, width, min_width, radius_px=None):
                         lambda cl, cr: abs(0.5 * (cr - cl) / radius_px - 1.0) <= _RADIUS_TOL)
     if fit is not None:
         return fit
+    outside = _partner_outside(col_score, peaks, width, radius_px)
+    if outside:
+        raise ChamberNotFound(outside)
     if pair is None:
         raise err
     return pair
+
+
+def _partner_outside(col_score, peaks, width, radius_px):
+    """Why the strongest zone (of ``peaks``) is one wall of a well whose other wall lies outside the frame's
+    ``width`` columns, at twice the chamber's radius on its well's side ("" when it is not so): measured blind,
+    a well with one wall outside the field was refused as walls that are not straight lines."""
+    c = max(peaks, key=lambda q: col_score[q], default=None)
+    if c is None:
+        return ""
+    side = _wall_side(col_score, c)
+    others = [c + 2.0 * radius_px * s for s in ((-side,) if side else (-1, 1))]  # (a left wall's, -1, is right)
+    if not all(o < 0 or o > width - 1 for o in others):
+        return ""
+    where = " or ".join(f"{o:.0f}" for o in others)
+    return (f"one wall silhouette of a well of the chamber's radius ({radius_px:.0f} px) only, at column {c}: its "
+            f"other wall would lie at column {where}, outside the frame's {width} columns (this route needs the "
+            f"whole well in the field, its walls give the rim and register the drift, or the chamber's radius is "
+            f"not this well's)")
 
 
 def _zone_pair(col_score, width, min_width):

@@ -723,6 +723,25 @@ def test_three_wells_40_um_apart_growing_sideways_are_read_as_three():
         extract(s.frames, pixel_size=p, frame_interval=600.0, chamber=wide, progress=False, tracer="silhouette")
 
 
+def test_a_well_with_one_wall_outside_the_field_is_refused_saying_so():
+    """Measured blind: a well whose left wall lies outside the field was refused as walls that are not straight
+    lines (the one wall paired with another zone).  With the chamber's radius, the error says where the other
+    wall would be."""
+    from osmobulge.imaging.optics import Optics
+    from osmobulge.imaging.synthetic import Nuisances, SceneGeometry, render_series
+
+    p = 0.8e-6
+    with pytest.warns(UserWarning, match="leaves the field"):  # (the well does)
+        s = render_series([0.0, 0.3], lambda_pre=PRE, shape=(560, 700), chamber=(150e-6, 110e-6, 20e-6),
+                          pixel_size=p, seed=112, scene=SceneGeometry(axis_position=(150.0, 330.0)),
+                          optics=Optics(n_elastomer=1.415, objective_na=0.25, condenser_na=0.12, defocus=2e-6),
+                          nuisances=Nuisances(noise_sigma=0.01, blur_sigma=0.7))
+    with pytest.raises(ChamberNotFound, match=r"up: one wall silhouette of a well of the chamber's radius \(188 px\) "
+                                              r"only, at column 33\d: its other wall would lie at column -\d+, "
+                                              r"outside the frame's 700 columns"):
+        _extract(s, tracer="silhouette")
+
+
 def test_a_dome_past_the_half_way_column_is_measured_until_the_domes_meet():
     """ho_blind_1206c: this dome, larger than its neighbour's, passes the column half-way to the neighbour's well
     while the neighbour's dome is still far (the search stopped there and the frames were flagged touching 4
