@@ -147,6 +147,9 @@ _SPECK_PX = 8
 #: measured row by row (:meth:`_gap_rows`), each row's a running median over _GAP_ROWS rows (a speck a few rows
 #: high is not a face); the next frame's dome is then searched for up to the middle of that gap on each row
 _NEAR_PX, _GAP_ROWS = 20.0, 15
+#: a frame whose base is more than _GAIN_TOL brighter or darker than the first frame's (the lamp, the exposure) is
+#: divided by that ratio first
+_GAIN_TOL = 0.05
 #: how far (px) beyond the outer face the neighbour's dome is looked for (a gap further is not measured: the next
 #: frame's search then reaches half of it past the face, never less than the half-way column)
 _GAP_REACH = 64.0
@@ -229,7 +232,8 @@ def _profiles(img):
             c[j] += v
         r[i] = acc / w
     c /= h
-    return r - r.mean(), c - c.mean()
+    level = r.mean()
+    return r - level, c - c.mean(), level
 
 
 class _Shift1D:
@@ -670,7 +674,8 @@ class SilhouetteTracer:
         self.view_shape = img.shape
         # the base below the film (walls, well bottom), registered frame to frame; no dome there
         self._reg_rows = (int(np.ceil(w.base_row + 5)), min(int(w.base_row + self.depth) + 40, img.shape[0]))
-        self._reg_ref = tuple(_Shift1D(p) for p in _profiles(img[slice(*self._reg_rows)]))
+        rows_p, cols_p, self._reg_level = _profiles(img[slice(*self._reg_rows)])
+        self._reg_ref = (_Shift1D(rows_p), _Shift1D(cols_p))
         self.prev = None
         self._edge_reached = (None, np.inf)  # the last frame with a dome and its margin to the field's edge, px
         self._track = None  # the last ok frames' outer faces (u, z), px (one or two)
@@ -759,11 +764,11 @@ class SilhouetteTracer:
                                wall_rms=float(w.rms))
 
     # ---------------------------------------------------------------------- one frame
-    def _walls(self, img):
-        """This frame's walls and its drift (dx, dy) from the first frame."""
+    def _walls(self, img, rows_p, cols_p):
+        """This frame's walls and its drift (dx, dy) from the first frame (``rows_p``, ``cols_p``: its base's
+        :func:`_profiles`)."""
         # the drift: the base's row and column profiles (its mean over columns and over rows; the well's bottom
         # face and the walls) registered against the first frame's, each by phase correlation
-        rows_p, cols_p = _profiles(img[slice(*self._reg_rows)])
         dy, dx = -self._reg_ref[0].shift(rows_p), -self._reg_ref[1].shift(cols_p)
         if max(abs(dx), abs(dy)) > self.settings.max_drift:
             raise ChamberNotFound(f"the base moved {np.hypot(dx, dy):.0f} px since the first frame, more than "
@@ -802,8 +807,15 @@ class SilhouetteTracer:
         frame = native_frame(frame)  # (no copy when it is already the kernels' kind)
         img = np.rot90(frame, self.k)  # (a view: only the crops the walls are read on are copied)
         out = FrameTrace(index=index)
+        rows_p, cols_p, level = _profiles(img[slice(*self._reg_rows)])
+        gain = level / self._reg_level if self._reg_level > 0 else 1.0
+        if gain > 0.0 and abs(gain - 1.0) > _GAIN_TOL:  # (the light changed since the first frame: read in its
+            # light; a black frame is left as it is)
+            frame = np.ascontiguousarray(frame / gain, np.float32)
+            img = np.rot90(frame, self.k)
+        out.figures["light_gain"] = float(gain)
         try:
-            w, dx, dy = self._walls(img)
+            w, dx, dy = self._walls(img, rows_p, cols_p)
         except ChamberNotFound as err:
             out.message = f"chamber walls not found: {err}"
             out.flag, out.flag_figure, out.flag_value = "no_membrane", "wall_rms", np.nan

@@ -285,6 +285,26 @@ HELD_OUT_LOOKS: dict[str, Look] = {
                 neighbours=((-240e-6, 0.9), (240e-6, 1.1))),
         chamber=(100e-6, 110e-6, 20e-6), pixel_size=0.8e-6, seed=98,
     ),
+    # added 2026-12-06 (eighteenth and nineteenth) with the renderer's exposure_sigma (the lamp or the exposure
+    # changing between frames), defined after the tracer learnt to read a frame in the first frame's light
+    # (light_gain), measured once each: ho_blind_1206r (15 % a frame, the dome growing down, halos): 25 ok, 0
+    # silent, worst 0.57 of the tolerance, rim within 0.14 px; ho_blind_1206s (8 % a frame, the water near full
+    # scale, a neighbour each side, dust, 10 bits): 16 ok, 1 touching with the bands 4.6 px apart (within
+    # tolerance), the 8 touching frames flagged, 0 silent, worst 0.15, rim within 0.15 px.  The code before
+    # light_gain: 88 % and 47 % of the frames without contact within tolerance (3 and 12 frames flagged), 0 silent
+    "ho_blind_1206r": Look(
+        Optics(n_elastomer=1.416, n_liquid=1.352, objective_na=0.28, condenser_na=0.13, defocus=-3e-6,
+               halo_strength=0.3, halo_width=2.5e-6),
+        replace(_N, noise_sigma=0.012, blur_sigma=0.8, drift_sigma=0.5, exposure_sigma=0.15, bit_depth=12),
+        chamber=(160e-6, 110e-6, 21e-6), pixel_size=0.85e-6, seed=113, scene=SceneGeometry(bulge_direction="down"),
+    ),
+    "ho_blind_1206s": Look(
+        Optics(n_elastomer=1.42, n_liquid=1.348, objective_na=0.25, condenser_na=0.12, defocus=2e-6,
+               halo_strength=0.25, brightness=0.9),
+        replace(_N, noise_sigma=0.01, blur_sigma=0.7, drift_sigma=0.4, exposure_sigma=0.08, dust_count=15,
+                bit_depth=10, neighbours=((-380e-6, 0.8), (380e-6, 1.2))),
+        chamber=(140e-6, 110e-6, 20e-6), pixel_size=0.9e-6, seed=114,
+    ),
 }
 
 

@@ -164,6 +164,10 @@ class Nuisances:
         in both directions (frame 0 undrifted).
     drift : array_like of shape (T, 2) or None, px
         Explicit (column, row) offset of every frame; overrides ``drift_sigma``.
+    exposure_sigma : float
+        The lamp or the exposure changing between frames: every frame after
+        the first has its light scaled by ``1 + exposure_sigma * N(0, 1)``
+        (at least 0.3, at most 2), independently; the truth's ``light_gain``.
     dust_count : int
         Dust specks on the optics (fixed in the camera frame).
     dust_radius : tuple of float, px
@@ -203,6 +207,7 @@ class Nuisances:
     tilt: float = 0.0
     drift_sigma: float = 0.0
     drift: object = None
+    exposure_sigma: float = 0.0
     dust_count: int = 0
     dust_radius: tuple = (2.0, 6.0)
     dust_opacity: float = 0.5
@@ -231,6 +236,7 @@ class Nuisances:
             "blur_sigma": (0.0, 50.0),
             "tilt": (-45.0, 45.0),
             "drift_sigma": (0.0, 100.0),
+            "exposure_sigma": (0.0, 0.5),
             "dust_opacity": (0.0, 1.0),
             "delamination_length": (0.01, 2.0),
             "delamination_gap": (0.0, 20.0),
@@ -591,14 +597,17 @@ def _blur(img, sigma):
     return out
 
 
-def _finish(img, nuis: Nuisances, illum, dust, rng):
-    """Polarity, dust, illumination, noise and quantisation of one (blurred) frame."""
+def _finish(img, nuis: Nuisances, illum, dust, rng, gain=1.0):
+    """Polarity, dust, illumination (its field and its frame's ``gain``), noise and quantisation of one (blurred)
+    frame."""
     if nuis.polarity < 0:
         img = 1.0 - img
     if dust is not None:
         img *= dust
     if illum is not None:
         img *= illum
+    if gain != 1.0:
+        img *= np.float32(gain)
     photons, sigma = float(nuis.poisson_photons), float(nuis.noise_sigma)
     if 0 < photons < _POISSON_NORMAL:  # few photons: exact Poisson counts
         img = (rng.poisson(np.clip(img, 0.0, None) * photons) / photons).astype(np.float32)
@@ -917,6 +926,10 @@ def render_series(
     dust, specks = _dust((rows, cols), nuis, rng_dust)
     dtype = np.uint8 if nuis.bit_depth == 8 else np.uint16
     frames = np.empty((n_t, rows, cols), dtype)
+    gains = np.ones(n_t)
+    if nuis.exposure_sigma > 0 and n_t > 1:  # (a stream of its own: the other draws as without it)
+        rng_exposure = np.random.default_rng(np.random.SeedSequence(int(seed), spawn_key=(8,)))
+        gains[1:] = np.clip(1.0 + nuis.exposure_sigma * rng_exposure.standard_normal(n_t - 1), 0.3, 2.0)
     for i in range(n_t):
         fr = _Frame(
             r=prof.r[i],
@@ -934,7 +947,7 @@ def render_series(
         else:
             img = sc.render_optical(fr, drift[i], optics, nuis.blur_sigma)
         rng_noise = np.random.default_rng(np.random.SeedSequence(int(seed), spawn_key=(7, i)))
-        frames[i] = _finish(img, nuis, illum, dust, rng_noise)
+        frames[i] = _finish(img, nuis, illum, dust, rng_noise, float(gains[i]))
 
     truth = _truth(
         v,
@@ -961,6 +974,9 @@ def render_series(
     if nb:
         truth["neighbour_gap"] = ("time", nb_gap, {"units": "m", "long_name": "least gap between the dome's band "
                                                   "and a neighbour's (< 0: they overlap, the frame is touching)"})
+    if nuis.exposure_sigma > 0:
+        truth["light_gain"] = ("time", gains, {"units": "1", "long_name": "the frame's light over the first "
+                                                "frame's (the lamp, the exposure)"})
     truth.attrs["dust_specks"] = specks.ravel() if specks.size else "none"
     if hasattr(chamber, "to_attrs"):  # a modeling Chamber: its loading too (Chamber.from_attrs round-trips)
         truth.attrs.update({k: float(v) for k, v in chamber.to_attrs().items()})

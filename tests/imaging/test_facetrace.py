@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from osmobulge.imaging._chamber import ChamberNotFound
-from osmobulge.imaging._facetrace import SilhouetteTracer, dark_background
+from osmobulge.imaging._facetrace import SilhouetteTracer, _profiles, dark_background
 from osmobulge.imaging.extract import extract
 from osmobulge.imaging.looks import LOOKS, render_look, score
 from osmobulge.imaging.trace import TraceSettings
@@ -639,7 +639,8 @@ def test_the_noise_is_the_changes_spread_over_the_water(edge_dark):
 
     tr = SilhouetteTracer(edge_dark.frames[0], **_known(edge_dark))
     frame = np.asarray(edge_dark.frames[2])
-    w, dx, dy = tr._walls(np.rot90(frame, tr.k))
+    img = np.rot90(frame, tr.k)
+    w, dx, dy = tr._walls(img, *_profiles(img[slice(*tr._reg_rows)])[:2])
 
     def sample(points, directions, offsets, own=True):  # (no neighbours: the same either way)
         return tr._change(frame, points, directions, offsets, dx, dy)
@@ -831,6 +832,23 @@ def test_a_dome_grown_out_of_the_field_is_flagged_as_such(route):
     assert list(ds.flag_figure.values[2:]) == ["field_margin"] * 2
     assert np.all(ds.flag_value.values[2:] < 3.0) and np.all(sc["dv_tol"][:2] <= 1.0), sc["dv_tol"]
     assert all("the field's edge: the dome may have grown out of the field" in str(m) for m in ds.message.values[2:])
+
+
+def test_a_frame_in_other_light_is_read_in_the_first_frames(edge_dark):
+    """The lamp or the exposure changed between frames: measured blind, every frame's light scaled by 1 +- 0.3 at
+    random left 1-8 of 9 frames flagged on six looks (the change in the water over 10x the noise everywhere).
+    A frame whose base is more than 5 % brighter or darker than the first frame's is divided by that ratio
+    first (light_gain): the same volumes."""
+    want = _extract(edge_dark)
+    f = np.asarray(edge_dark.frames, float)
+    f[1:] *= np.array([0.65, 1.3, 0.75])[:, None, None]
+    scaled = np.clip(np.round(f), 0, np.iinfo(edge_dark.frames.dtype).max).astype(edge_dark.frames.dtype)
+    ds = _extract(edge_dark.__class__(scaled, edge_dark.truth))
+    assert list(ds.flag.values) == ["ok"] * 4
+    np.testing.assert_allclose(ds.light_gain.values, [1.0, 0.65, 1.3, 0.75], rtol=0.01)
+    np.testing.assert_allclose(ds.volume.values[2:], want.volume.values[2:], rtol=5e-3)
+    got, base = score(edge_dark.truth, ds)["dv_tol"], score(edge_dark.truth, want)["dv_tol"]
+    assert np.all(got <= 1.0) and np.all(np.abs(got - base) < 0.1), (got, base)
 
 
 def test_a_blank_or_partly_blank_frame_says_so(edge_dark):

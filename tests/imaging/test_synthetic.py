@@ -557,3 +557,24 @@ def test_touching_truth_flag_sees_crossing_domes():
     nu = Nuisances(neighbours=((260e-6, 0.3), (-260e-6, 0.3)))
     ser = render_series([0.5, 5.0], chamber=(100e-6, 50e-6, 10e-6), nuisances=nu, shape=(512, 768), pixel_size=1e-6)
     assert list(ser.truth.flag.values) == ["ok", "touching"]
+
+
+def test_exposure_changes_scale_each_frames_light_and_nothing_else():
+    """exposure_sigma: frames after the first in another light (the truth's light_gain), drawn from a stream of
+    their own: the same scene, noise and drift as without it, each frame's grey levels times its gain."""
+    kw = {"shape": (300, 400), "chamber": (60e-6, 40e-6, 10e-6), "seed": 3}
+    plain = render_series([0.0, 0.5, 1.0, 1.5], nuisances=Nuisances(noise_sigma=0.0, drift_sigma=1.0), **kw)
+    lit = render_series([0.0, 0.5, 1.0, 1.5], nuisances=Nuisances(noise_sigma=0.0, drift_sigma=1.0,
+                                                                   exposure_sigma=0.1), **kw)
+    g = lit.truth.light_gain.values
+    assert g[0] == 1.0 and np.all(g[1:] != 1.0) and np.all(np.abs(g - 1.0) < 0.25)
+    assert "light_gain" not in plain.truth and lit.truth.attrs["nuisance_exposure_sigma"] == 0.1
+    np.testing.assert_array_equal(lit.frames[0], plain.frames[0])
+    np.testing.assert_array_equal(lit.truth.drift_x.values, plain.truth.drift_x.values)
+    full = 2**16 - 1
+    for i in range(1, 4):  # (grey levels rounded to whole counts, the bright ones clipped at full scale)
+        a, b = plain.frames[i].astype(float), lit.frames[i].astype(float)
+        ok = a * g[i] < full - 1
+        np.testing.assert_allclose(b[ok], a[ok] * g[i], atol=0.5 * (1.0 + g[i]) + 1e-3)  # (two roundings)
+    with pytest.raises(ValueError, match="exposure_sigma"):
+        Nuisances(exposure_sigma=0.8)
