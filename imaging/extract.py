@@ -667,9 +667,10 @@ def _blank_note(frame, first_share):
     value, share = _mode_share(frame)
     if share - first_share <= BLANK_SHARE:
         return ""
-    what = "blank (every pixel" if share == 1.0 else f"partly blank ({100 * share:.0f} % of its pixels"
-    return (f"the frame is {what} {value}; the first frame's most common value, {100 * first_share:.0f} %): a "
-            "transfer cut short, the shutter or the lamp? ")
+    what = (f"blank (every pixel is {value})" if share == 1.0 else
+            f"partly blank ({100 * share:.0f} % of its pixels are {value}; the first frame's most common value, "
+            f"{100 * first_share:.0f} %)")
+    return f"the frame is {what}: a transfer cut short, the shutter or the lamp? "
 
 
 class _Run:

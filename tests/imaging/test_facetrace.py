@@ -861,9 +861,10 @@ def test_a_blank_or_partly_blank_frame_says_so(edge_dark):
     ds = _extract(edge_dark.__class__(f, edge_dark.truth))  # (the truth's attrs: the chamber)
     assert list(ds.flag.values[:2]) == ["ok", "ok"] and all(ds.flag.values[2:] != "ok")
     assert list(ds.message.values[:2]) == ["", ""]
-    assert str(ds.message.values[2]).startswith("the frame is blank (every pixel 0;")
-    assert str(ds.message.values[3]).startswith("the frame is blank (every pixel 65535;")
-    assert str(ds.message.values[4]).startswith("the frame is partly blank (68 % of its pixels 0;")
+    assert str(ds.message.values[2]).startswith("the frame is blank (every pixel is 0): a transfer cut short")
+    assert str(ds.message.values[3]).startswith("the frame is blank (every pixel is 65535):")
+    assert str(ds.message.values[4]).startswith("the frame is partly blank (68 % of its pixels are 0; the first "
+                                                "frame's most common value, 0 %):")
 
 
 def test_a_dome_that_reads_flat_after_a_dome_is_flagged(edge_dark):
