@@ -150,6 +150,10 @@ _NEAR_PX, _GAP_ROWS = 20.0, 15
 #: a frame whose base is more than _GAIN_TOL brighter or darker than the first frame's (the lamp, the exposure) is
 #: divided by that ratio first
 _GAIN_TOL = 0.05
+#: the film beyond each foot checked for a lift (:meth:`SilhouetteTracer._rim_contact`): ``_LIFT_SPAN`` film
+#: thicknesses (at least ``_LIFT_MIN_PX``) from ``_LIFT_GAP`` px past the foot, against the change ``_LIFT_FAR``
+#: radii out from the rim
+_LIFT_SPAN, _LIFT_MIN_PX, _LIFT_GAP, _LIFT_FAR = 1.0, 12.0, 4.0, (0.5, 0.8)
 #: how far (px) beyond the outer face the neighbour's dome is looked for (a gap further is not measured: the next
 #: frame's search then reaches half of it past the face, never less than the half-way column)
 _GAP_REACH = 64.0
@@ -863,6 +867,7 @@ class SilhouetteTracer:
                 out.flag, out.flag_figure, out.flag_value = "poor_fit", "dome_contrast", out.figures["dome_contrast"]
             return out
         self._edge_reached = (index, figs.get("field_margin", np.inf))
+        out.figures["rim_contact"] = self._rim_contact(sample, w, u, z, noise)
         if self.bounds is None:
             return self._finish(u, z, w, g, out)
         self._lim_next = None
@@ -871,6 +876,47 @@ class SilhouetteTracer:
         if self._lim_next is not None and out.flag in ("ok", "touching"):  # (the next frame's search limits)
             self._lim = self._lim_next
         return out
+
+    def _rim_contact(self, sample, w, u, z, noise):
+        """Whether the film just outside the rims still lies on the top surface: 1 - the share of the
+        ``_LIFT_SPAN`` film thicknesses beyond each foot (the outer face's outermost point within 2 l0 of the top
+        face, plus ``_LIFT_GAP`` px of its halo) over which the change on the film's rows (l0 above to l0 below
+        the top face) is loud from the foot on, least of the two sides (1: on the surface, 0: lifted all along;
+        nan: no side with its reference in this chamber's columns).
+
+        Loud: over 10x the noise and 3x the same rows' median change ``_LIFT_FAR`` radii out (a film shifted
+        everywhere is a misregistration, not a lift).  Measured on painted delaminated frames (the film lifted
+        1.5 l0 at the rim, over 0.3 a), read by this route as ok 4.8-7.2x the tolerance off: this route had no
+        delamination check.
+        """
+        a = w.rim_radius
+        rows = w.top_row + self.l0 * np.array([-1.0, -0.5, 0.0, 0.5, 1.0])
+        low = z < 2.0 * self.l0
+        contact = np.nan
+        dx = w.axis_col - self.walls0.axis_col  # (the drift: the bounds are the first frame's columns)
+        for j, side in enumerate((-1.0, 1.0)):
+            # the reference: within the frame and this chamber's columns (measured on three wells 40 um apart:
+            # beyond them it is 0, and a top face shifted by a fraction of a px read as a lift on every frame);
+            # none, no word on this side
+            edge = self.view_shape[1] - 1.0 if side > 0 else 0.0
+            if self.bounds is not None and np.isfinite(self.bounds[j]):
+                edge = side * min(side * edge, side * (self.bounds[j] + dx))
+            far0 = w.axis_col + side * (1.0 + _LIFT_FAR[0]) * a
+            far_len = min((_LIFT_FAR[1] - _LIFT_FAR[0]) * a, side * (edge - far0))
+            if far_len < 0.1 * a:
+                continue
+            mine = low & (side * u > 0.0)
+            start = max(float(np.max(side * u[mine])) if mine.any() else a, a) + _LIFT_GAP
+            pts = np.column_stack((np.full(rows.size, w.axis_col + side * start), rows))
+            dirs = np.tile([side, 0.0], (rows.size, 1))
+            near = np.max(np.abs(sample(pts, dirs, np.arange(0.0, max(_LIFT_SPAN * self.l0, _LIFT_MIN_PX), 1.0))),
+                          axis=0)
+            pts[:, 0] = far0
+            far = np.max(np.abs(sample(pts, dirs, np.arange(0.0, far_len, 1.0))), axis=0)
+            loud = near > max(10.0 * noise, 3.0 * float(np.median(far)))
+            run = int(np.argmin(loud)) if not loud.all() else loud.size  # (from the foot on)
+            contact = np.nanmin([contact, 1.0 - run / loud.size])
+        return float(contact)
 
     def _limits(self, rows, dy):
         """The columns (first frame's view) the dome is searched for between at view rows ``rows`` of a frame
@@ -1269,6 +1315,7 @@ class SilhouetteTracer:
             # (first: a stretch of the dome outside the frame is no tear, and a neighbour is not seen there)
             ("poor_fit", "field_margin", fig.get("field_margin", np.inf) < FIELD_MARGIN_PX),
             ("touching", "neighbour_gap", fig.get("neighbour_gap", np.inf) < st.touching_flag),
+            ("delaminated", "rim_contact", fig.get("rim_contact", np.nan) < st.delamination_flag),
             ("fractured", "gap_length", fig.get("gap_length", 0.0) > st.gap_flag),
             ("poor_fit", "flat_film", self.film_mismatch > max(_FILM_TOL_PX, _FILM_TOL * self.l0)),
             ("poor_fit", "low_dome", fig.get("low_dome", np.inf) < _LOW_DOME_PX),

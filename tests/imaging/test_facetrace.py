@@ -851,6 +851,22 @@ def test_a_frame_in_other_light_is_read_in_the_first_frames(edge_dark):
     assert np.all(got <= 1.0) and np.all(np.abs(got - base) < 0.1), (got, base)
 
 
+def test_a_film_lifted_off_beside_the_rims_is_delaminated_on_this_route():
+    """The renderer's delaminated frames (the film lifted 1.5 l0 at the rims, over 0.3 a; painted: the optics
+    renderer draws no events).  Measured: this route, forced, read them ok 7.2x and 4.8x the tolerance off (no
+    delamination check).  The change on the film's rows beyond each foot, loud from the foot on against the same
+    rows' 0.5-0.8 radii out, is the lift: those frames delaminated, the others' rim contact near 1."""
+    vt = [0.0, 0.5, 0.92, 1.41, 1.98]
+    nu = replace(LOOKS["painted_band"].nuisances, delaminated_frames=(2, 3))
+    s = render_look("painted_band", vt, lambda_pre=PRE, nuisances=nu)
+    assert list(s.truth.flag.values) == ["ok", "ok", "delaminated", "delaminated", "ok"]
+    ds = _extract(s, tracer="silhouette")
+    sc = score(s.truth, ds)
+    assert list(ds.flag.values) == ["ok", "ok", "delaminated", "delaminated", "ok"], ds.rim_contact.values
+    assert sc["n_silent"] == 0 and np.all(ds.rim_contact.values[[1, 4]] > 0.8)
+    assert np.all(ds.rim_contact.values[2:4] < 0.5)
+
+
 def test_a_blank_or_partly_blank_frame_says_so(edge_dark):
     """A camera's blank frames mid-series (measured: black and white frames read as chamber walls not found, no
     word of the image): a flagged frame mostly at one value, more than the first frame, says so first."""
