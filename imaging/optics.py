@@ -61,7 +61,7 @@ from dataclasses import dataclass, fields
 import numpy as np
 from scipy import ndimage
 
-__all__ = ["Optics", "transmission", "optical_path", "render_optical"]
+__all__ = ["Optics", "Hole", "Collapse", "transmission", "optical_path", "render_optical"]
 
 
 @dataclass(frozen=True)
@@ -142,6 +142,57 @@ class Optics:
     def to_attrs(self) -> dict:
         """netCDF-safe attrs (prefixed ``optics_``)."""
         return {f"optics_{f.name}": getattr(self, f.name) for f in fields(self)}
+
+
+@dataclass(frozen=True)
+class Hole:
+    """A piece of a dome's shell torn out (a fractured frame): water where its faces and the liquid under them were.
+
+    Over heights ``w_lo .. w_hi`` (m above the flat film's mid-surface) on the side ``side`` of the axis (+1: u > 0,
+    -1: u < 0), the wedge of azimuths within ``half_angle`` (rad) of the image plane is water: a ray at ``x`` from
+    the axis crosses a circle of radius ``R`` there along ``2 max(0, sqrt(R^2 - x^2) - |x| tan(half_angle))``
+    instead of its whole chord, so the silhouette on that side is gone over those heights (a window torn in the
+    dome's side seen edge-on; its torn edges are oblique to the rays and make no silhouette of their own).
+    ``side = 0``: a hole at the pole, every azimuth above ``w_lo`` (the dome's cap missing).
+    """
+
+    w_lo: float
+    w_hi: float
+    side: int
+    half_angle: float = math.pi / 3
+
+    def chords(self, x, w, *chords):
+        """The chords (at ``x`` from the axis, heights ``w``) with the wedge taken out; and the mask of samples
+        whose silhouettes it removes."""
+        band = (w >= self.w_lo) & (w <= self.w_hi)
+        if self.side == 0:
+            return [np.where(band, 0.0, c) for c in chords], band
+        band &= self.side * x > 0.0
+        cut = 2.0 * np.abs(x) * math.tan(self.half_angle)
+        return [np.where(band, np.clip(c - cut, 0.0, None), c) for c in chords], band
+
+
+@dataclass(frozen=True)
+class Collapse:
+    """A dome torn away (a collapsed frame): the film over the well gone, the well open to the bath through the
+    film's layer (``|u| < rim``), and its flaps hanging from the rim into the well, drawn as a cone of revolution
+    (the torn petals all round, seen from the side): mid-surface from the rim at the film's mid-surface down and
+    inwards at ``angle`` (rad below the horizontal) over ``length`` (m), thickness ``thickness`` (m)."""
+
+    length: float
+    angle: float
+    thickness: float
+
+    def flap_chord(self, x, w, rim, liquid_radius):
+        """Path (m) in the flaps, within the liquid (radius ``liquid_radius`` at each point: the flaps' outer face
+        leaves the well at its top), of rays at ``x`` from the axis, heights ``w`` (0 outside them)."""
+        depth = self.length * math.sin(self.angle)
+        mid = rim + w / math.tan(self.angle)  # (w <= 0: the cone narrows downwards)
+        half = 0.5 * self.thickness / math.sin(self.angle)  # (its horizontal half width)
+        inside = (w <= 0.0) & (w >= -depth)
+        outer = np.minimum(mid + half, liquid_radius)
+        inner = np.clip(mid - half, 0.0, outer)
+        return np.clip(_chord(np.where(inside, outer, 0.0), x) - _chord(np.where(inside, inner, 0.0), x), 0.0, None)
 
 
 # --------------------------------------------------------------------------------------
@@ -248,9 +299,11 @@ def optical_path(u, w, chambers, a, h, l0, optics: Optics, dw=None, cover_out=No
     u, w : ndarray
         Scene coordinates (m): along the rim line, and height above the flat
         membrane's mid-surface.
-    chambers : list of (offset, r, z, thickness_ratio, lambda_pre)
+    chambers : list of (offset, r, z, thickness_ratio, lambda_pre[, event])
         Each chamber's axis offset (m) and half profile (``r, z`` in units of
-        ``a``, pole -> rim).
+        ``a``, pole -> rim; a film lifted off the top face beyond the rim
+        continues it outwards down to the top face); ``event``, optional: a
+        :class:`Hole` in the dome or a :class:`Collapse` of it (``None``: none).
     dw : float, m, optional
         Height of the sample around each point: the flat faces (the device's top
         face, the film's lower face, the well's bottom) are then area-weighted
@@ -275,7 +328,8 @@ def optical_path(u, w, chambers, a, h, l0, optics: Optics, dw=None, cover_out=No
     shell = np.zeros(np.shape(u))
     cover = []  # (flat indices, fraction inside, side) of the samples a silhouette crosses
     uf, wf = np.ravel(u), np.ravel(w)
-    for uc, r, z, t, lam in chambers:
+    for uc, r, z, t, lam, *event in chambers:
+        event = event[0] if event else None
         rim = a * lam
         # the well: radius linear from a (bottom) to a lambda_pre (top face); only its samples are computed
         in_well = np.ravel(in_base - _below(-top - h, w, dw))
@@ -285,6 +339,16 @@ def optical_path(u, w, chambers, a, h, l0, optics: Optics, dw=None, cover_out=No
         liquid.flat[sel] += in_well[sel] * _chord(rw, x, dw)
         if dw is not None:
             cover.append(_crossing(sel, rw, x, dw))
+        if isinstance(event, Collapse):  # the well open through the film's layer, the flaps hanging into it
+            sel = np.flatnonzero((wf >= -top - event.length - (dw or 0.0)) & (wf <= top + (dw or 0.0)))
+            x, ws = uf[sel] - uc, wf[sel]
+            layer = np.ravel(in_slab - in_base)[sel]
+            liquid.flat[sel] += layer * _chord(np.full(x.shape, rim), x, dw)
+            wall = np.where(ws < -top, a + (rim - a) * (np.clip(ws, -top - h, -top) + top + h) / h, rim)
+            liquid.flat[sel] = np.clip(liquid.flat[sel] - event.flap_chord(x, ws, rim, wall), 0.0, None)
+            if dw is not None:
+                cover.append(_crossing(sel, np.where(layer > 0, rim, 0.0), x, dw))
+            continue
         if np.max(z) * a <= 1e-3 * l0:  # flat membrane: no dome above the top face
             continue
         inner, outer = _faces(r, z, t, a, l0)
@@ -301,7 +365,10 @@ def optical_path(u, w, chambers, a, h, l0, optics: Optics, dw=None, cover_out=No
             ci = ci + _chord(ri, x, dw) / len(heights)
             co = co + _chord(ro, x, dw) / len(heights)
             if dw is not None and wk is ws:
-                cover += [_crossing(sel, ri, x, dw), _crossing(sel, ro, x, dw)]
+                torn = np.zeros(x.shape, bool) if event is None else event.chords(x, ws)[1]
+                cover += [_crossing(sel, np.where(torn, 0.0, rad), x, dw) for rad in (ri, ro)]
+        if isinstance(event, Hole):
+            (ci, co), _ = event.chords(x, ws, ci, co)
         liquid.flat[sel] += (1.0 - np.ravel(in_base)[sel]) * ci
         shell.flat[sel] += (1.0 - np.ravel(in_slab)[sel]) * (co - ci)
     slab = np.clip(optics.depth - liquid, 0.0, None)
@@ -376,7 +443,8 @@ def render_optical(shape, to_scene, chambers, a, h, l0, pixel_size, optics: Opti
     shape : (rows, cols)
     to_scene : callable
         ``(cols, rows) px -> (u, w) m`` for arrays of fractional pixel positions.
-    chambers : list of (offset, r, z, thickness_ratio, lambda_pre)
+    chambers : list of (offset, r, z, thickness_ratio, lambda_pre[, event])
+        As :func:`optical_path`.
     a, h, l0 : float, m
     pixel_size : float, m
     optics : Optics

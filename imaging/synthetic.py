@@ -505,11 +505,46 @@ class _Scene:
             flat[hit] += cov[hit] * (np.float32(lm) - flat[hit])
         return img
 
+    def _optical_chamber(self, fr: _Frame):
+        """The reference chamber for :func:`optics.optical_path`, with the frame's event drawn as the painted model
+        draws it: delaminated, the dome lifted by ``delamination_gap l0`` and the film beyond each rim peeled off the
+        top face over ``delamination_length a`` (a continuation of the profile down to the top face, ``l0`` thick);
+        fractured, the piece of the dome the painted model leaves out (the arc ``fracture_centre +-
+        fracture_gap / 2`` of the midline from the left rim) torn out of its side (:class:`optics.Hole`: its heights
+        on its side, or the cap when it spans the pole); collapsed, the well open and its flaps hanging in
+        (:class:`optics.Collapse`, as the painted flaps: 60 degrees, ``min(0.6 a, 0.9 h / sin 60 + rim / 2)``)."""
+        from osmobulge.imaging.optics import Collapse, Hole
+
+        a, l0, nuis = self.a, self.l0, self.nuis
+        r, z, t, lam = fr.r, fr.z, fr.t, fr.lam
+        if fr.flag == "delaminated":
+            lift, dl = nuis.delamination_gap * l0, nuis.delamination_length * a
+            uu = np.linspace(0.0, dl, 48)[1:]
+            r = np.r_[r, (a * lam + uu) / a]
+            z = np.r_[z + lift / a, lift * (1.0 - uu / dl) ** 2 / a]
+            t = np.r_[t, np.ones(uu.size)]
+            return (0.0, r, z, t, lam)
+        if fr.flag == "fractured" and nuis.fracture_mode == "collapsed":
+            rim = a * lam
+            length = min(0.6 * a, 0.9 * self.h / math.sin(math.radians(60)) + 0.5 * rim)
+            return (0.0, r, np.zeros_like(z), t, lam, Collapse(length, math.radians(60), float(t[-1]) * l0))
+        if fr.flag == "fractured":
+            mid = _midline(r, z, a, 0.0)
+            seg = np.hypot(*np.diff(mid, axis=0).T)
+            s = np.r_[0.0, np.cumsum(seg)] / seg.sum()
+            lo, hi = fr.fracture_centre - 0.5 * nuis.fracture_gap, fr.fracture_centre + 0.5 * nuis.fracture_gap
+            w_lo, w_hi = np.interp([lo, hi], s, mid[:, 1])
+            if lo < 0.5 < hi:  # (the pole's cap)
+                return (0.0, r, z, t, lam, Hole(float(min(w_lo, w_hi)), np.inf, 0))
+            side = 1 if lo >= 0.5 else -1
+            return (0.0, r, z, t, lam, Hole(float(min(w_lo, w_hi)), float(max(w_lo, w_hi)), side))
+        return (0.0, r, z, t, lam)
+
     def render_optical(self, fr: _Frame, drift, optics, sigma):
         """Bright-field image of the frame from its optics (:func:`optics.render_optical`)."""
         from osmobulge.imaging.optics import render_optical
 
-        chambers = [(0.0, fr.r, fr.z, fr.t, fr.lam)] + [tuple(nb) for nb in fr.neighbours]
+        chambers = [self._optical_chamber(fr)] + [tuple(nb) for nb in fr.neighbours]
         return render_optical(
             self.shape,
             lambda c, r: self.to_scene(c, r, drift),
@@ -808,8 +843,8 @@ def render_series(
         and focus (:mod:`osmobulge.imaging.optics`) instead of painted grey
         levels; ``scene``'s grey levels and ``contrast`` are then unused, the
         other nuisances (blur, polarity, light, noise, bit depth, drift, tilt,
-        neighbours) apply.  Event frames (delaminated, fractured, touching)
-        are painted-only.
+        neighbours, events) apply.  Events are drawn in the scene's
+        geometry (:meth:`_Scene._optical_chamber`).
 
     Returns
     -------
@@ -861,8 +896,6 @@ def render_series(
 
         if not isinstance(optics, Optics):
             raise TypeError(f"optics must be an Optics, got {type(optics).__name__}")
-        if nuis.delaminated_frames or nuis.fractured_frames or nuis.touching_frames:
-            raise ValueError("event frames (delaminated, fractured, touching) are rendered by the painted model only")
 
     ss = np.random.SeedSequence(int(seed))
     rng_drift, rng_dust, rng_event = (np.random.default_rng(s) for s in ss.spawn(3))

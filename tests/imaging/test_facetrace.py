@@ -867,6 +867,25 @@ def test_a_film_lifted_off_beside_the_rims_is_delaminated_on_this_route():
     assert np.all(ds.rim_contact.values[2:4] < 0.5)
 
 
+@pytest.mark.parametrize("mode", ["gap", "collapsed"])
+def test_optically_rendered_events_are_flagged(mode):
+    """Events drawn by the optics model (the renderer drew them painted only until now): the film lifted beyond
+    the rims (a skirt of revolution with liquid under it), a piece torn out of the dome's side, the dome torn away
+    (the well open, its flaps hanging in).  Each is flagged as what it is, or as no membrane, and the frames after
+    it are read within the tolerance again.  Measured on the 14 presets (Vtilde 0..4, 8 frames, 1024 px): every
+    delaminated and collapsed frame flagged, 0 silent."""
+    vt = [0.0, 0.6, 1.2, 2.0, 2.6]  # (seed 0: frame 3's tear lies on the right, arc 0.51-0.66 from the left rim)
+    nu = replace(LOOKS["edge_dark"].nuisances, delaminated_frames=(2,), fractured_frames=(3,), fracture_mode=mode)
+    s = render_look("edge_dark", vt, shape=SHAPE, lambda_pre=PRE, nuisances=nu)
+    assert list(s.truth.flag.values) == ["ok", "ok", "delaminated", "fractured", "ok"]
+    ds = _extract(s)
+    sc = score(s.truth, ds)
+    got = list(ds.flag.values)
+    assert got[:3] == ["ok", "ok", "delaminated"] and got[4] == "ok", (got, ds.message.values)
+    assert got[3] == ("fractured" if mode == "gap" else "no_membrane"), (got, ds.message.values)
+    assert sc["n_silent"] == 0 and sc["dv_tol"][4] < 0.5 and ds.rim_contact.values[2] < 0.5
+
+
 def test_a_blank_or_partly_blank_frame_says_so(edge_dark):
     """A camera's blank frames mid-series (measured: black and white frames read as chamber walls not found, no
     word of the image): a flagged frame mostly at one value, more than the first frame, says so first."""

@@ -4,10 +4,11 @@ import math
 
 import numpy as np
 import pytest
+from scipy.spatial import cKDTree
 
 from osmobulge.imaging.looks import HELD_OUT_LOOKS, LOOKS, OUTSIDE_LOOKS, render_look, score
-from osmobulge.imaging.optics import Optics, _splat, optical_path, transmission
-from osmobulge.imaging.synthetic import Nuisances, render_series
+from osmobulge.imaging.optics import Collapse, Hole, Optics, _splat, optical_path, transmission
+from osmobulge.imaging.synthetic import Nuisances, SceneGeometry, _Frame, _Scene, render_series
 
 
 def _mc_transmission(theta, o):
@@ -67,6 +68,117 @@ def test_optical_path_of_a_spherical_shell_is_sphere_chords(zc):
     np.testing.assert_allclose(film, sphere_chord(ro) - sphere_chord(ri), atol=0.5e-6)
     want = (o.n_elastomer - o.n_water) * film + (o.n_liquid - o.n_water) * liq
     np.testing.assert_allclose(opd, want, rtol=1e-12)
+
+
+def _ray_paths(u, w, liquid_at, film_at, half_depth, n=40001):
+    """Brute force: path lengths (m) of rays along y through the points (u, w), each sampled at n points over
+    the slab's depth; ``liquid_at(rho, y, u, w)`` and ``film_at(...)`` classify 3-D points (rho: from the axis)."""
+    y = np.linspace(-half_depth, half_depth, n)
+    dy = y[1] - y[0]
+    liq, film = np.empty(len(u)), np.empty(len(u))
+    for k, (uk, wk) in enumerate(zip(u, w, strict=True)):
+        rho = np.hypot(uk, y)
+        lq = liquid_at(rho, y, uk, wk)
+        liq[k] = dy * np.count_nonzero(lq)
+        film[k] = dy * np.count_nonzero(film_at(rho, y, uk, wk) & ~lq)
+    return liq, film
+
+
+@pytest.mark.parametrize("side", [1, -1, 0])
+def test_a_hole_torn_in_a_dome_is_water_over_its_wedge(side):
+    """A fractured frame's hole (optics.Hole) against rays sampled through the 3-D shell: a spherical shell whose
+    faces and liquid within 60 degrees of the image plane on one side (or, side 0, above a height: the cap) are
+    water over the hole's heights."""
+    a, h, l0, zc = 200e-6, 110e-6, 20e-6, 0.0
+    rho = math.sqrt(1 + zc * zc)
+    r, z, _ = _spherical_cap(rho, zc)
+    ro, ri = rho * a + 0.5 * l0, rho * a - 0.5 * l0
+    hole = Hole(60e-6, 120e-6 if side else np.inf, side, math.pi / 3)
+    rng = np.random.default_rng(3)
+    u = rng.uniform(-1.1 * ro, 1.1 * ro, 60)
+    w = rng.uniform(30e-6, 150e-6, 60)
+    liq, film = optical_path(u, w, [(0.0, r, z, np.ones_like(r), 1.0, hole)], a, h, l0, Optics())[3:0:-2]
+
+    def torn(y, uk, wk):
+        if not hole.w_lo <= wk <= hole.w_hi:
+            return np.zeros(y.shape, bool)
+        if side == 0:
+            return np.ones(y.shape, bool)
+        return (side * uk > 0) & (np.abs(y) < abs(uk) * math.tan(hole.half_angle))
+
+    def d(rho_, wk):
+        return np.hypot(rho_, wk - zc * a)
+
+    want_liq, want_film = _ray_paths(
+        u, w, lambda rr, y, uk, wk: (d(rr, wk) < ri) & ~torn(y, uk, wk),
+        lambda rr, y, uk, wk: (d(rr, wk) < ro) & ~torn(y, uk, wk), 1.2 * ro)
+    np.testing.assert_allclose(liq, want_liq, atol=0.1e-6)
+    np.testing.assert_allclose(film, want_film, atol=0.1e-6)
+    assert np.any(want_film[(w > 60e-6) & (w < 120e-6)] == 0.0) and np.any(want_film > 0.0)  # (the hole is met)
+
+
+def test_a_collapsed_dome_opens_the_well_and_hangs_its_flaps_in_it():
+    """A collapsed frame (optics.Collapse) against rays sampled through the 3-D well: the film over the well gone
+    (liquid through its layer), a conical shell of flaps from the rim's mid-surface down at 60 degrees."""
+    a, h, l0, depth = 200e-6, 110e-6, 20e-6, 1e-3
+    o = Optics(depth=depth)
+    r = np.linspace(0, 1, 50)
+    col = Collapse(length=120e-6, angle=math.radians(60), thickness=20e-6)
+    top = 0.5 * l0
+    rng = np.random.default_rng(4)
+    u = rng.uniform(-1.1 * a, 1.1 * a, 60)
+    w = rng.uniform(-top - 0.9 * h, 0.9 * top, 60)
+    _, film, base, liq = optical_path(u, w, [(0.0, r, np.zeros_like(r), np.ones_like(r), 1.0, col)], a, h, l0, o)
+
+    def flap(rr, wk):
+        mid = a + wk / math.tan(col.angle)
+        return (wk <= 0) & (wk >= -col.length * math.sin(col.angle)) & (
+            np.abs(rr - mid) < 0.5 * col.thickness / math.sin(col.angle))
+
+    def liquid(rr, y, uk, wk):  # the well (a cylinder: no pre-stretch) and the opened layer over it, less the flaps
+        return (rr < a) & (wk < top) & ~flap(rr, wk)
+
+    want_liq, want_el = _ray_paths(u, w, liquid, lambda rr, y, uk, wk: np.ones(y.shape, bool), 0.5 * depth)
+    np.testing.assert_allclose(liq, want_liq, atol=0.1e-6)
+    np.testing.assert_allclose(film + base, want_el, atol=0.1e-6)
+    plain = depth - 2.0 * np.sqrt(np.clip(a * a - u * u, 0.0, None))  # (the elastomer beside a plain well)
+    assert np.any((w < -top) & (want_el > plain + 1e-6))  # (rays through the flaps are met)
+
+
+def test_a_delaminated_film_is_a_lifted_skirt_in_the_optics():
+    """A delaminated frame's film beyond the rim (peeled off over 0.3 a, 1.5 l0 high at the rim: the painted
+    model's ``lift (1 - s / dl)**2``) against rays sampled through the 3-D skirt: liquid under it, film within l0/2
+    of its mid-surface, the device's slab below the top face."""
+    a, h, l0, depth = 200e-6, 110e-6, 20e-6, 1e-3
+    nuis = Nuisances(delaminated_frames=(0,))
+    sc = _Scene(a, h, l0, 1e-6, (400, 600), SceneGeometry(), nuis)
+    r = np.linspace(0, 1, 200)
+    fr = _Frame(r=r, z=0.1 * (1 - r**2), t=np.ones_like(r), lam=1.0, flag="delaminated")
+    chamber = sc._optical_chamber(fr)
+    lift, dl, top = 1.5 * l0, 0.3 * a, 0.5 * l0
+    rng = np.random.default_rng(5)
+    u = rng.uniform(a + 15e-6, a + dl + 20e-6, 60) * rng.choice([-1, 1], 60)
+    w = rng.uniform(-0.9 * top, lift + top, 60)
+    o = Optics(depth=depth)
+    _, film, base, liq = optical_path(u, w, [chamber], a, h, l0, o)
+    ss = np.linspace(0.0, dl, 6001)
+    mid = np.column_stack((a + ss, lift * (1 - ss / dl) ** 2))
+    tree = cKDTree(mid)
+
+    def dist(rr, wk):  # distance in (rho, w) to the skirt's mid-surface and the flat film's beyond it
+        d = tree.query(np.column_stack((rr, np.full(rr.shape, wk))))[0]
+        return np.where(rr > a + dl, np.minimum(d, abs(wk)), d)
+
+    def under(rr, wk):
+        return (wk > -top) & (wk < np.interp(rr, mid[:, 0], mid[:, 1])) & (dist(rr, wk) > 0.5 * l0)
+
+    def elastomer(rr, y, uk, wk):
+        return (dist(rr, wk) < 0.5 * l0) | (wk < top)
+
+    want_liq, want_el = _ray_paths(u, w, lambda rr, y, uk, wk: under(rr, wk), elastomer, 0.5 * depth)
+    np.testing.assert_allclose(liq, want_liq, atol=0.3e-6)
+    np.testing.assert_allclose(film + base, want_el, atol=0.3e-6)
+    assert np.any(want_liq > 50e-6)  # (rays under the skirt are met)
 
 
 def test_optical_path_of_the_flat_device():
@@ -177,8 +289,6 @@ def test_optics_rejects_bad_input():
         Optics(condenser_na=0.1, condenser_inner_na=0.2)
     with pytest.raises(TypeError, match="optics"):
         render_series([0.0], optics={"defocus": 1e-6})
-    with pytest.raises(ValueError, match="painted"):
-        render_series([0.0, 1.0], optics=Optics(), nuisances=Nuisances(fractured_frames=(1,)))
 
 
 def test_looks_render_and_held_out_is_disjoint():
