@@ -17,12 +17,20 @@ the render and extraction times per frame.  ``HELD_OUT_LOOKS`` are printed
 apart: they are measured, never tuned on; ``OUTSIDE_LOOKS`` (dark field) last, where
 the row is the refusal.  A look where the chamber is not found
 prints the error instead.
+
+``--events gap|polar|collapsed`` renders each look with events drawn by the
+optics model as well: the film delaminated in frame ``n // 3`` and torn in
+frames ``n // 2`` and ``n - 2`` (``gap``: a piece of ``fracture_gap`` 0.15 of the
+arc, on a side or over the pole as the seed falls; ``polar``: 0.4, always the
+cap; ``collapsed``: the dome torn away); the "events flagged" column then counts
+them, and a frame after an event must be read again.
 """
 
 from __future__ import annotations
 
 import argparse
 import time
+from dataclasses import replace
 
 import numpy as np
 
@@ -34,9 +42,18 @@ from osmobulge.modeling.transport import Chamber
 PRE = PreStretch(0.01, 0.0)
 
 
-def row(name, vt):
+def _events(name, n, mode):
+    """The look's nuisances with the events of ``--events mode`` in a series of n frames."""
+    look = LOOKS.get(name) or HELD_OUT_LOOKS.get(name) or OUTSIDE_LOOKS[name]
+    torn = {"gap": {"fracture_gap": 0.15}, "polar": {"fracture_gap": 0.4},
+            "collapsed": {"fracture_mode": "collapsed"}}[mode]
+    return replace(look.nuisances, delaminated_frames=(n // 3,), fractured_frames=(n // 2, n - 2), **torn)
+
+
+def row(name, vt, events=None):
     t0 = time.perf_counter()
-    s = render_look(name, vt, lambda_pre=PRE)
+    extra = {} if events is None else {"nuisances": _events(name, len(vt), events)}
+    s = render_look(name, vt, lambda_pre=PRE, **extra)
     t_render = time.perf_counter() - t0
     a, h, l0 = (s.truth.attrs[k] for k in ("chamber_radius", "chamber_depth", "membrane_thickness"))
     t0 = time.perf_counter()
@@ -60,6 +77,8 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--frames", type=int, default=9, help="frames from Vtilde 0 to 4")
     ap.add_argument("--held-out-only", action="store_true")
+    ap.add_argument("--events", choices=("gap", "polar", "collapsed"),
+                    help="draw a delaminated and two torn frames in each look (see the module's docstring)")
     args = ap.parse_args()
     vt = np.linspace(0.0, 4.0, args.frames) ** 1.5 / 2.0
     head = ("| look                 | route | worst dV/tol (ok) | V ok | rim bias px (median) | worst rim px |"
@@ -70,10 +89,11 @@ def main():
         groups.insert(0, ("presets", LOOKS))
         groups.append(("outside the method (must be refused with a reason)", OUTSIDE_LOOKS))
     for title, looks in groups:
-        print(f"\n## {title}: Vtilde {', '.join(f'{x:.2f}' for x in vt)}\n")
+        events = "" if args.events is None else f" (events: {args.events})"
+        print(f"\n## {title}{events}: Vtilde {', '.join(f'{x:.2f}' for x in vt)}\n")
         print(head)
         for name in looks:
-            print(row(name, vt), flush=True)
+            print(row(name, vt, args.events), flush=True)
 
 
 if __name__ == "__main__":

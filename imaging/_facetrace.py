@@ -99,6 +99,17 @@ _FIRST_SIGMA = 1.0
 _FACE_SIGMA = 0.25
 #: an edge further than this (px) from the running median of its neighbours' is a jump
 _JUMP_PX = 3.0
+# a straight stretch of the outer face (:func:`_least_bend`: its least bend over 10 % of its arc, over its mean bend;
+# directions along chords of 2 film thicknesses, at least 2 _BEND_CHORD_PX; no word on a dome turning less than
+# _BEND_MIN_DEG in all) under _BEND_FLAG flags a frame: a membrane under pressure bends everywhere.  Measured (optics,
+# 2026-12-06): a cap torn off the pole leaves a flat top, -0.18..0.005 on the 9 such frames that were read ok,
+# 4-10.8x the tolerance off on 6 (absorbing_band, defocus, no_grey_step; the edge-only looks lose the edge there);
+# the 647 ok frames of the cached renders (25 looks, the 97-frame day, the 25-frame neighbour renders, 8x the read
+# noise, a 2 um/px day to V/V0 12) 0.33 at least (a corner-based figure flagged the last two: a few px of glitch in
+# the trace, their volumes right)
+_BEND_CHORD_PX = 8.0
+_BEND_MIN_DEG = 40.0
+_BEND_FLAG = 0.1
 #: fraction of rays over the dome whose edge jumped, or that have none, that flags poor_fit
 _JUMP_FLAG, _LOST_FLAG = 0.05, 0.10
 #: horizontal transects (rows) the change's noise is measured on: on the 21 looks at 9 frames within -4..+7 % of
@@ -475,6 +486,29 @@ def _scatter(u, z):
     if len(u) < 5:
         return 0.0
     return 1.4826 * median(np.hypot(np.diff(u, 2), np.diff(z, 2))) / np.sqrt(6.0)
+
+
+def _least_bend(xy, chord, share=0.1):
+    """How little the outer face bends anywhere: the least turn of its direction over ``share`` of its arc, over
+    its mean turn over as much (1: a circle's, the same everywhere; 0: a straight stretch; below 0: bent the other
+    way).  Its points ``xy`` lie every px from one foot over the top to the other; its direction at each is that
+    of the chord between the points ``chord`` px before and after (a glitch of a few px, noise, barely turn it).
+    nan when it turns less than ``_BEND_MIN_DEG`` in all (a low dome: too little bend to tell a straight stretch).
+
+    A membrane under pressure bends everywhere (its meridian is convex); a cap torn off the pole leaves a flat top.
+    """
+    c = max(int(round(chord)), 1)
+    n = len(xy)
+    if n < 2 * c + 3:
+        return np.nan
+    i = np.arange(c, n - c)
+    d = xy[i + c] - xy[i - c]
+    theta = np.unwrap(np.arctan2(d[:, 1], d[:, 0]))
+    total = theta[-1] - theta[0]
+    w = int(share * (theta.size - 1))
+    if abs(total) < np.radians(_BEND_MIN_DEG) or w < 2:
+        return np.nan
+    return float(np.min((theta[w:] - theta[:-w]) / (total * w / (theta.size - 1))))
 
 
 def _station_shares(xy):
@@ -1261,6 +1295,7 @@ class SilhouetteTracer:
         s, xy = face.sample(step=1.0)
         resid = float(np.sqrt(np.nanmean(face.normal_residuals**2)))
         tang = face.tangent(s)
+        out.figures["least_bend"] = _least_bend(xy, max(self.l0, _BEND_CHORD_PX))
         normal = np.column_stack((-tang[:, 1], tang[:, 0]))  # outward for a curve left rim -> over the top -> right rim
         l0, rim = self.l0, 0.5 * (rim_l + rim_r)
         # the film's thickness along the curve: uniform first, then from the kinematics of the last mid-surface,
@@ -1293,6 +1328,10 @@ class SilhouetteTracer:
         out.flag, out.flag_figure, out.flag_value = self._flag(out.figures)
         if out.flag_figure == "field_margin":
             out.message = field_edge_message(out.flag_value)
+        elif out.flag_figure == "least_bend":
+            out.message = (f"a straight stretch in the dome's outline (its least bend over a tenth of it "
+                           f"{out.flag_value:.2f} of its mean, under {_BEND_FLAG:g}): a membrane under pressure "
+                           f"bends everywhere; a cap torn off, or another edge followed")
         out.ok, out.mode = True, "silhouette"
         if out.flag == "ok":
             self.prev = out
@@ -1317,6 +1356,7 @@ class SilhouetteTracer:
             ("touching", "neighbour_gap", fig.get("neighbour_gap", np.inf) < st.touching_flag),
             ("delaminated", "rim_contact", fig.get("rim_contact", np.nan) < st.delamination_flag),
             ("fractured", "gap_length", fig.get("gap_length", 0.0) > st.gap_flag),
+            ("poor_fit", "least_bend", fig.get("least_bend", np.nan) < _BEND_FLAG),
             ("poor_fit", "flat_film", self.film_mismatch > max(_FILM_TOL_PX, _FILM_TOL * self.l0)),
             ("poor_fit", "low_dome", fig.get("low_dome", np.inf) < _LOW_DOME_PX),
             ("poor_fit", "edge_lost", fig.get("edge_lost", 0.0) > _LOST_FLAG),

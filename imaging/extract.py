@@ -45,6 +45,8 @@ _FIGURES = {
     "neighbour_gap": ("m", "gap between the dome and another (neighbour's) membrane"),
     "edge_jumps": ("1", "silhouette route: fraction of rays whose outer-face edge jumped from its neighbours'"),
     "edge_lost": ("1", "silhouette route: fraction of rays over the dome without an outer-face edge"),
+    "least_bend": ("1", "silhouette route: the outer face's least bend over 10 % of its arc over its mean bend "
+                          "(1: a circle; 0: a straight stretch, as a cap torn off leaves)"),
     "light_gain": ("1", "silhouette route: the base's mean light over the first frame's (the lamp, the exposure; "
                         "a frame more than 5 % off is divided by it before it is read)"),
 }
@@ -683,7 +685,7 @@ class _Run:
             "volume_disagreement", "dome_contrast", "gap_length", "rim_contact", "neighbour_gap", "tilt", "drift_x",
             "drift_y", "axis_col", "axis_row", "volume_ellipse", "ellipse_a", "ellipse_b", "ellipse_rms",
             "flag_value", "well_depth", "band_thickness", "wall_rms", "line_rms", "edge_jumps", "edge_lost",
-            "light_gain")}
+            "light_gain", "least_bend")}
         self.flag = np.array(["no_membrane"] * n, dtype=object)
         self.flag_figure = np.array([""] * n, dtype=object)
         self.source_kind = np.array(["auto"] * n, dtype=object)
@@ -773,7 +775,7 @@ def _store(i, res, run, frame, p):
     scal["flag_value"][i] = res.flag_value
     scal["drift_x"][i], scal["drift_y"][i] = res.drift
     for k in ("residual_rms", "volume_disagreement", "dome_contrast", "gap_length", "rim_contact", "neighbour_gap",
-              "edge_jumps", "edge_lost", "light_gain"):
+              "edge_jumps", "edge_lost", "light_gain", "least_bend"):
         v = res.figures.get(k, np.nan)
         scal[k][i] = v if np.isfinite(v) else (np.inf if v == np.inf else np.nan)
     if g is None:

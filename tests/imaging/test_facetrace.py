@@ -165,6 +165,41 @@ def test_the_points_scatter_sets_the_faces_smoothing():
     assert _scatter(np.arange(4.0), np.zeros(4)) == 0.0
 
 
+def test_the_least_bend_of_a_dome_and_of_a_flat_topped_one():
+    """_least_bend on points every 3 px with 0.3 px of noise through the face's spline, as the tracer fits them: a
+    circle of 200 px bends the same everywhere (1), an ellipse of 200 x 150 px least at its top (its curvature there
+    over its mean: 0.66); a circle whose cap is cut off flat (the cut 30 and 60 deg from the pole) not at all on
+    the flat (0); a glitch of 4 px in the circle barely changes it; a dome turning under 40 deg in all: no word."""
+    from osmobulge.imaging._facetrace import _FACE_SIGMA, _least_bend
+    from osmobulge.imaging.geometry import smooth_profile
+
+    rng = np.random.default_rng(9)
+
+    def bend(u, z):
+        face = smooth_profile(np.column_stack((u + rng.normal(0.0, 0.3, u.size), z + rng.normal(0.0, 0.3, u.size))),
+                              sigma=max(_FACE_SIGMA, 0.3))
+        return _least_bend(face.sample(step=1.0)[1], 16.0)
+
+    phi = np.arange(0.05, np.pi - 0.05, 3.0 / 200.0)[::-1]  # (left foot -> over the top -> right foot)
+    assert bend(200 * np.cos(phi), 200 * np.sin(phi)) == pytest.approx(1.0, abs=0.1)
+    b = 150.0
+    t = np.linspace(0.0, np.pi, 20001)
+    arc = np.trapezoid(np.hypot(200 * np.sin(t), b * np.cos(t)), t)
+    assert bend(200 * np.cos(phi), b * np.sin(phi)) == pytest.approx(b / 200**2 / (np.pi / arc), abs=0.1)
+    bump = 4.0 * np.exp(-0.5 * ((phi - 2.0) / 0.02) ** 2)  # (a glitch 8 px wide, 4 px out)
+    assert bend((200 + bump) * np.cos(phi), (200 + bump) * np.sin(phi)) > 0.5
+    for cut_deg in (30.0, 60.0):
+        u, z = 200 * np.cos(phi), 200 * np.sin(phi)
+        cut = 200.0 * np.cos(np.radians(cut_deg))
+        inner = np.flatnonzero(z >= cut)
+        top = np.arange(u[inner[0] - 1] + 3.0, u[inner[-1] + 1] - 1.5, 3.0)  # (the flat top, every 3 px)
+        u = np.r_[u[: inner[0]], top, u[inner[-1] + 1:]]
+        z = np.r_[z[: inner[0]], np.full(top.size, cut), z[inner[-1] + 1:]]
+        assert abs(bend(u, z)) < 0.05, cut_deg
+    low = np.linspace(np.pi / 2 + 0.3, np.pi / 2 - 0.3, 200)  # (a cap turning 34 deg)
+    assert np.isnan(bend(600 * np.cos(low), 600 * np.sin(low)))
+
+
 def test_a_noisy_look_smooths_its_face_by_its_own_scatter(monkeypatch):
     """edge_dark with 8x its read noise (0.08 of full scale): the face's points scatter 0.34-0.37 px, above
     _FACE_SIGMA, and set the spline's smoothing; every frame ok and within 0.6 of the volume tolerance (0.39
@@ -884,6 +919,23 @@ def test_optically_rendered_events_are_flagged(mode):
     assert got[:3] == ["ok", "ok", "delaminated"] and got[4] == "ok", (got, ds.message.values)
     assert got[3] == ("fractured" if mode == "gap" else "no_membrane"), (got, ds.message.values)
     assert sc["n_silent"] == 0 and sc["dv_tol"][4] < 0.5 and ds.rim_contact.values[2] < 0.5
+
+
+def test_a_dome_with_its_cap_torn_off_is_not_read_ok():
+    """A tear spanning the pole (fracture_gap 0.4: the cap above 0.3 of the arc from the rim gone; optics.Hole):
+    the defocused look shows a flat-topped dome, which this route read ok 4x the tolerance off at Vtilde 1.2 (its
+    edge followed along the cut).  Its straight top (least_bend about 0, over 0.29 on the looks' domes) flags
+    it."""
+    vt = [0.0, 0.6, 1.2, 2.0]
+    nu = replace(LOOKS["defocus"].nuisances, fractured_frames=(2,), fracture_gap=0.4)
+    s = render_look("defocus", vt, shape=SHAPE, lambda_pre=PRE, nuisances=nu)
+    ds = _extract(s)
+    sc = score(s.truth, ds)
+    assert sc["dv_tol"][2] > 2.0  # (the frame's volume is wrong: it must not be read ok)
+    assert ds.flag.values[2] == "poor_fit" and ds.flag_figure.values[2] == "least_bend", ds.message.values
+    assert "straight stretch" in ds.message.values[2] and abs(ds.least_bend.values[2]) < 0.05
+    assert list(ds.flag.values[[0, 1, 3]]) == ["ok"] * 3 and np.all(ds.least_bend.values[[1, 3]] > 0.5)
+    assert sc["n_silent"] == 0
 
 
 def test_a_blank_or_partly_blank_frame_says_so(edge_dark):
