@@ -349,6 +349,27 @@ class _Frame:
     fracture_centre: float = 0.5
 
 
+def _skirt(nuis, a, l0, n=48):
+    """A delaminated film beyond a rim: its mid-surface's distance past the rim and height above the flat film's
+    (m), ``lift (1 - s / dl)**2`` from ``lift = delamination_gap l0`` at the rim down to the top face at
+    ``dl = delamination_length a`` (the painted and the optics renderers draw the same)."""
+    lift, dl = nuis.delamination_gap * l0, nuis.delamination_length * a
+    uu = np.linspace(0.0, dl, n)
+    return uu, lift * (1.0 - uu / dl) ** 2
+
+
+def _flap_length(a, h, rim):
+    """Length (m) of a collapsed dome's flaps, hanging from the rim into the well at 60 degrees."""
+    return min(0.6 * a, 0.9 * h / math.sin(math.radians(60)) + 0.5 * rim)
+
+
+def _torn(mid, fr, nuis):
+    """The arc fraction of each point of a full midline (left rim 0 -> right rim 1) and the torn piece's ends."""
+    seg = np.hypot(*np.diff(mid, axis=0).T)
+    s = np.r_[0.0, np.cumsum(seg)] / seg.sum()
+    return s, fr.fracture_centre - 0.5 * nuis.fracture_gap, fr.fracture_centre + 0.5 * nuis.fracture_gap
+
+
 def _midline(r, z, a, uc):
     """Full dome midline (u, w) from the left rim over the pole to the right rim."""
     u = np.r_[uc - a * r[::-1], uc + a * r[1:]]
@@ -422,16 +443,14 @@ class _Scene:
                 liquid.append((interior, 1.0))
             if collapsed:
                 t_rim = float(t[-1]) * l0
-                length = min(0.6 * a, 0.9 * h / math.sin(math.radians(60)) + 0.5 * rim)
+                length = _flap_length(a, h, rim)
                 for sgn in (-1.0, 1.0):
                     p0 = np.array([uc + sgn * rim, 0.0])
                     d = np.array([-sgn * math.cos(math.radians(60)), -math.sin(math.radians(60))])
                     pts = p0 + np.linspace(0, length, 24)[:, None] * d
                     membrane.append((band_polygon(pts, 0.5 * t_rim), 1.0))
             elif is_ref and fr.flag == "fractured":
-                seg = np.hypot(*np.diff(mid, axis=0).T)
-                s = np.r_[0.0, np.cumsum(seg)] / seg.sum()
-                lo, hi = fr.fracture_centre - 0.5 * nuis.fracture_gap, fr.fracture_centre + 0.5 * nuis.fracture_gap
+                s, lo, hi = _torn(mid, fr, nuis)
                 for sel in (s <= lo, s >= hi):
                     if sel.sum() >= 2:
                         domes.append((mid[sel], 0.5 * thick[sel]))
@@ -442,9 +461,8 @@ class _Scene:
             membrane.append((circle_polygon(mid[-1], join), 1.0))
             left_rim, right_rim = uc - rim, uc + rim
             if is_ref and lift > 0:
+                uu, ww = _skirt(nuis, a, l0)
                 for sgn in (-1.0, 1.0):
-                    uu = np.linspace(0.0, dl, 48)
-                    ww = lift * (1.0 - uu / dl) ** 2
                     pts = np.stack([uc + sgn * (rim + uu), ww], axis=1)
                     membrane.append((band_polygon(pts, 0.5 * l0), 1.0))
                     membrane.append((circle_polygon(pts[-1], 0.5 * l0), 1.0))
@@ -518,21 +536,17 @@ class _Scene:
         a, l0, nuis = self.a, self.l0, self.nuis
         r, z, t, lam = fr.r, fr.z, fr.t, fr.lam
         if fr.flag == "delaminated":
-            lift, dl = nuis.delamination_gap * l0, nuis.delamination_length * a
-            uu = np.linspace(0.0, dl, 48)[1:]
-            r = np.r_[r, (a * lam + uu) / a]
-            z = np.r_[z + lift / a, lift * (1.0 - uu / dl) ** 2 / a]
-            t = np.r_[t, np.ones(uu.size)]
+            uu, ww = _skirt(nuis, a, l0)
+            r = np.r_[r, (a * lam + uu[1:]) / a]
+            z = np.r_[z + ww[0] / a, ww[1:] / a]
+            t = np.r_[t, np.ones(uu.size - 1)]
             return (0.0, r, z, t, lam)
         if fr.flag == "fractured" and nuis.fracture_mode == "collapsed":
-            rim = a * lam
-            length = min(0.6 * a, 0.9 * self.h / math.sin(math.radians(60)) + 0.5 * rim)
+            length = _flap_length(a, self.h, a * lam)
             return (0.0, r, np.zeros_like(z), t, lam, Collapse(length, math.radians(60), float(t[-1]) * l0))
         if fr.flag == "fractured":
             mid = _midline(r, z, a, 0.0)
-            seg = np.hypot(*np.diff(mid, axis=0).T)
-            s = np.r_[0.0, np.cumsum(seg)] / seg.sum()
-            lo, hi = fr.fracture_centre - 0.5 * nuis.fracture_gap, fr.fracture_centre + 0.5 * nuis.fracture_gap
+            s, lo, hi = _torn(mid, fr, nuis)
             w_lo, w_hi = np.interp([lo, hi], s, mid[:, 1])
             if lo < 0.5 < hi:  # (the pole's cap)
                 return (0.0, r, z, t, lam, Hole(float(min(w_lo, w_hi)), np.inf, 0))

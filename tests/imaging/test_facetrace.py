@@ -938,6 +938,23 @@ def test_a_dome_with_its_cap_torn_off_is_not_read_ok():
     assert sc["n_silent"] == 0
 
 
+def test_a_delaminated_frame_between_close_neighbours_is_not_read_ok():
+    """Wells 2.8 radii apart: the rim-contact check's reference (0.5-0.8 radii beyond the rim) is cut off by the
+    half-way columns, so it has no word (nan), and the delaminated frame was read ok 6.7x the tolerance off.  The
+    lifted film's skirt, traced as part of the dome, bends the outline the other way (least_bend -4.3): the frame
+    is poor_fit.  (Found with the optics events on the held-out neighbour look ho_blind_1206k: 9.6x off.)"""
+    a = 200e-6
+    vt = [0.0, 0.5, 1.0, 1.2]
+    nu = replace(LOOKS["edge_dark"].nuisances, neighbours=((-2.8 * a, 0.7), (2.8 * a, 0.8)), delaminated_frames=(2,))
+    s = render_look("edge_dark", vt, shape=SHAPE, lambda_pre=PRE, nuisances=nu, seed=3)
+    assert list(s.truth.flag.values) == ["ok", "ok", "delaminated", "ok"]
+    ds = _extract(s)
+    sc = score(s.truth, ds)
+    assert np.isnan(ds.rim_contact.values[2]) and sc["dv_tol"][2] > 2.0
+    assert ds.flag.values[2] == "poor_fit" and ds.flag_figure.values[2] == "least_bend", ds.flag.values
+    assert sc["n_silent"] == 0 and list(ds.flag.values[[0, 1, 3]]) == ["ok"] * 3
+
+
 def test_a_blank_or_partly_blank_frame_says_so(edge_dark):
     """A camera's blank frames mid-series (measured: black and white frames read as chamber walls not found, no
     word of the image): a flagged frame mostly at one value, more than the first frame, says so first."""
