@@ -102,8 +102,8 @@ _JUMP_PX = 3.0
 # a straight stretch of the outer face (:func:`_least_bend`: its least bend over 10 % of its arc, over its mean bend;
 # directions along chords of 2 film thicknesses, at least 2 _BEND_CHORD_PX; no word on a dome turning less than
 # _BEND_MIN_DEG in all) under _BEND_FLAG flags a frame: a membrane under pressure bends everywhere.  Measured (optics,
-# 2026-12-06): a cap torn off the pole leaves a flat top, -0.18..0.005 on the 9 such frames that were read ok,
-# 4-10.8x the tolerance off on 6 (absorbing_band, defocus, no_grey_step; the edge-only looks lose the edge there);
+# 2026-12-06): a cap torn off the pole leaves a flat top, -0.18..0.005 on 9 such frames, 8 of them read ok before,
+# 5 of those 4.0-10.8x the tolerance off (absorbing_band, defocus, no_grey_step; the edge-only looks lose the edge);
 # the 647 ok frames of the cached renders (25 looks, the 97-frame day, the 25-frame neighbour renders, 8x the read
 # noise, a 2 um/px day to V/V0 12) 0.33 at least (a corner-based figure flagged the last two: a few px of glitch in
 # the trace, their volumes right)
