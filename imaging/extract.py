@@ -681,11 +681,9 @@ class _Run:
     def __init__(self, tracer, n, n_profile, priors, manual):
         self.tracer, self.n_profile, self.priors, self.manual = tracer, n_profile, priors, manual
         self.scal = {k: np.full(n, np.nan) for k in (
-            "bulge_height", "volume_left", "volume_right", "area_left", "area_right", "rim_radius", "residual_rms",
-            "volume_disagreement", "dome_contrast", "gap_length", "rim_contact", "neighbour_gap", "tilt", "drift_x",
+            "bulge_height", "volume_left", "volume_right", "area_left", "area_right", "rim_radius", "tilt", "drift_x",
             "drift_y", "axis_col", "axis_row", "volume_ellipse", "ellipse_a", "ellipse_b", "ellipse_rms",
-            "flag_value", "well_depth", "band_thickness", "wall_rms", "line_rms", "edge_jumps", "edge_lost",
-            "light_gain", "least_bend")}
+            "flag_value", "well_depth", "band_thickness", "wall_rms", "line_rms", *_FIGURES)}
         self.flag = np.array(["no_membrane"] * n, dtype=object)
         self.flag_figure = np.array([""] * n, dtype=object)
         self.source_kind = np.array(["auto"] * n, dtype=object)
@@ -774,8 +772,7 @@ def _store(i, res, run, frame, p):
     message[i] = res.message
     scal["flag_value"][i] = res.flag_value
     scal["drift_x"][i], scal["drift_y"][i] = res.drift
-    for k in ("residual_rms", "volume_disagreement", "dome_contrast", "gap_length", "rim_contact", "neighbour_gap",
-              "edge_jumps", "edge_lost", "light_gain", "least_bend"):
+    for k in _FIGURES:  # (the tracers' quality figures)
         v = res.figures.get(k, np.nan)
         scal[k][i] = v if np.isfinite(v) else (np.inf if v == np.inf else np.nan)
     if g is None:

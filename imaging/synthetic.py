@@ -358,9 +358,13 @@ def _skirt(nuis, a, l0, n=48):
     return uu, lift * (1.0 - uu / dl) ** 2
 
 
+#: a collapsed dome's flaps hang from the rim into the well at this angle below the horizontal (rad)
+_FLAP_ANGLE = math.radians(60)
+
+
 def _flap_length(a, h, rim):
-    """Length (m) of a collapsed dome's flaps, hanging from the rim into the well at 60 degrees."""
-    return min(0.6 * a, 0.9 * h / math.sin(math.radians(60)) + 0.5 * rim)
+    """Length (m) of a collapsed dome's flaps, hanging from the rim into the well at ``_FLAP_ANGLE``."""
+    return min(0.6 * a, 0.9 * h / math.sin(_FLAP_ANGLE) + 0.5 * rim)
 
 
 def _torn(mid, fr, nuis):
@@ -446,7 +450,7 @@ class _Scene:
                 length = _flap_length(a, h, rim)
                 for sgn in (-1.0, 1.0):
                     p0 = np.array([uc + sgn * rim, 0.0])
-                    d = np.array([-sgn * math.cos(math.radians(60)), -math.sin(math.radians(60))])
+                    d = np.array([-sgn * math.cos(_FLAP_ANGLE), -math.sin(_FLAP_ANGLE)])
                     pts = p0 + np.linspace(0, length, 24)[:, None] * d
                     membrane.append((band_polygon(pts, 0.5 * t_rim), 1.0))
             elif is_ref and fr.flag == "fractured":
@@ -543,7 +547,7 @@ class _Scene:
             return (0.0, r, z, t, lam)
         if fr.flag == "fractured" and nuis.fracture_mode == "collapsed":
             length = _flap_length(a, self.h, a * lam)
-            return (0.0, r, np.zeros_like(z), t, lam, Collapse(length, math.radians(60), float(t[-1]) * l0))
+            return (0.0, r, np.zeros_like(z), t, lam, Collapse(length, _FLAP_ANGLE, float(t[-1]) * l0))
         if fr.flag == "fractured":
             mid = _midline(r, z, a, 0.0)
             s, lo, hi = _torn(mid, fr, nuis)
