@@ -165,6 +165,40 @@ def test_the_points_scatter_sets_the_faces_smoothing():
     assert _scatter(np.arange(4.0), np.zeros(4)) == 0.0
 
 
+def test_what_came_in_from_the_field_edge_is_told_from_the_dome():
+    """_from_outside on the full search's rays (as _rays samples them: 361 rays from the rim plane's centre, from
+    outside in): a dome's face of radius 250 px, a neighbour's dome coming in at the field's right edge (its well
+    beyond it), a speck inside the field.  Only the neighbour's samples are returned; a dome grown out of the field
+    itself, or one touching the neighbour, is not foreign."""
+    from osmobulge.imaging._facetrace import _from_outside
+
+    shape, centre = (860, 1000), (500.0, 600.0)
+    phis = np.linspace(np.radians(1.0), np.pi - np.radians(1.0), 361)
+    t = np.arange(800.0, 0.0, -1.0)
+    cols = centre[0] + t[None, :] * np.cos(phis)[:, None]
+    rows = centre[1] - t[None, :] * np.sin(phis)[:, None]
+    inside = (cols >= 0) & (cols <= shape[1] - 1) & (rows >= 0)  # (outside the field the change is 0)
+
+    def ring(c, r, radius, half=2.5):
+        return inside & (np.abs(np.hypot(cols - c, rows - r) - radius) < half)
+
+    dome, neighbour = ring(500.0, 600.0, 250.0), ring(1150.0, 600.0, 200.0)
+    speck = inside & (np.hypot(cols - 800.0, rows - 300.0) < 5.0)
+    assert neighbour.sum() > 100 and speck.sum() > 5
+    got = _from_outside(dome | neighbour | speck, phis, t, centre, shape)
+    np.testing.assert_array_equal(got, neighbour)
+    assert _from_outside(dome | speck, phis, t, centre, shape) is None
+    # this chamber's own dome out of the field at the sides: still its dome (field_margin's business)
+    assert _from_outside(ring(500.0, 600.0, 520.0) | speck, phis, t, centre, shape) is None
+    # ... nor a piece of its face cut off from the rest at the field's edge (nothing of the dome behind it)
+    cut = ring(500.0, 600.0, 520.0) & ~((rows > 300.0) & (rows < 310.0))
+    assert _from_outside(cut, phis, t, centre, shape) is None
+    # ... nor a dome out of the field's top, whatever came in at the sides
+    assert _from_outside(ring(500.0, 700.0, 720.0) | neighbour, phis, t, centre, shape) is None
+    # a neighbour touching the dome is one piece with it: not told apart here (touching is flagged elsewhere)
+    assert _from_outside(dome | ring(1150.0, 600.0, 402.0, 4.0), phis, t, centre, shape) is None
+
+
 def test_the_least_bend_of_a_dome_and_of_a_flat_topped_one():
     """_least_bend on points every 3 px with 0.3 px of noise through the face's spline, as the tracer fits them: a
     circle of 200 px bends the same everywhere (1), an ellipse of 200 x 150 px least at its top (its curvature there
@@ -953,6 +987,29 @@ def test_a_delaminated_frame_between_close_neighbours_is_not_read_ok():
     assert np.isnan(ds.rim_contact.values[2]) and sc["dv_tol"][2] > 2.0
     assert ds.flag.values[2] == "poor_fit" and ds.flag_figure.values[2] == "least_bend", ds.flag.values
     assert sc["n_silent"] == 0 and list(ds.flag.values[[0, 1, 3]]) == ["ok"] * 3
+
+
+def test_neighbours_whose_wells_lie_beyond_the_field_are_not_taken_for_the_dome():
+    """Wells 3 radii apart in a 1000 px field: the neighbours' walls lie at the field's edges, out of sight, so
+    no bounds are known, and their domes come in at the sides as they grow.  The full search's low rays met them
+    first and the trace ran out to the field's edges: every dome frame was poor_fit (field_margin), 5.7-29x the
+    tolerance off.  The pieces that came in at the sides, with this dome's face behind them on their rays, are
+    passed over (_from_outside): the frames are read, within 0.02 of the tolerance."""
+    a = 200e-6
+    vt = [0.0, 0.5, 1.0, 2.2]
+    nu = replace(LOOKS["edge_dark"].nuisances, neighbours=((-3.0 * a, 0.8), (3.0 * a, 0.8)))
+    s = render_look("edge_dark", vt, shape=SHAPE, lambda_pre=PRE, nuisances=nu, seed=3)
+    frames = np.asarray(s.frames, float)
+    top = int(s.truth.attrs["anchor_row"]) - 20
+    for i in (2, 3):  # (the neighbours' domes are in the field, at both sides, above the top face)
+        moved = np.abs(frames[i, :top] - frames[0, :top]) > 0.1 * frames[0].max()
+        assert moved[:, :20].any() and moved[:, -20:].any()
+    t = SilhouetteTracer(s.frames[0], **_known(s))
+    assert t.bounds is None  # (no neighbour's wall seen)
+    ds = _extract(s)
+    sc = score(s.truth, ds)
+    assert list(ds.flag.values) == ["ok"] * 4, ds.message.values
+    assert np.all(np.abs(sc["dv_tol"]) < 0.1) and sc["n_silent"] == 0
 
 
 def test_a_blank_or_partly_blank_frame_says_so(edge_dark):
