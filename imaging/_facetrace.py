@@ -26,9 +26,10 @@ lines.  :class:`SilhouetteTracer` therefore reads, in each bulge-up frame:
    strong feature (of the dome's own sign; a halo or fringe of the other sign
    is not it) and on its outer flank the steepest rise (sub-pixel) is the
    silhouette edge.  Rays whose edge jumps from its
-   neighbours' (another fringe, dust) are dropped and counted; what came in
-   at the field's sides in front of the dome (a neighbour's dome whose well is
-   beyond the field, :func:`_from_outside`) is passed over on the rays;
+   neighbours' (another fringe, dust) are dropped and counted; what lies in
+   front of the dome in the water (a neighbour's dome whose well is beyond
+   the field, a time stamp burned into the frames: :func:`_in_front`) is
+   passed over on the rays;
 4. **the mid-surface**: the outer face (a smoothing spline through its
    points only) offset inwards by half the film's thickness (incompressible
    film of uniform meridional stretch, :func:`_thickness`; the film over the
@@ -101,9 +102,10 @@ _FIRST_SIGMA = 1.0
 _FACE_SIGMA = 0.25
 #: an edge further than this (px) from the running median of its neighbours' is a jump
 _JUMP_PX = 3.0
-#: the full search's rays within this angle (rad) of the pole: no neighbour's dome rises over the dome's pole there
-#: (:func:`_from_outside`)
-_POLE_RAYS = np.radians(30.0)
+#: a piece of the full search's change with this share of its samples more than _FRONT_L0 film thicknesses outside
+#: the dome's face on their rays (outside it at all, for a piece at the field's side edges) is in front of the
+#: dome (:func:`_in_front`)
+_FRONT_SHARE, _FRONT_L0 = 0.8, 2.0
 # a straight stretch of the outer face (:func:`_least_bend`: its least bend over 10 % of its arc, over its mean bend;
 # directions along chords of 2 film thicknesses, at least 2 _BEND_CHORD_PX; no word on a dome turning less than
 # _BEND_MIN_DEG in all) under _BEND_FLAG flags a frame: a membrane under pressure bends everywhere.  Measured (optics,
@@ -440,46 +442,48 @@ def _first_edges(v, t, sign, noise, size=9):
     return te, found, jump, thr, figs
 
 
-def _from_outside(on, phis, t, centre, shape):
-    """The samples of the rays' change (``on``: above the edge threshold, one row a ray at angle ``phis`` from the
-    rim plane, sampled at ``t`` px from ``centre`` (col, row) of the view of ``shape``, from outside in) that
-    belong to something that came in at the field's sides in front of this chamber's dome, or None when there is
-    none.
+def _in_front(on, phis, t, centre, width, gap):
+    """The samples of the rays' change that belong to something in front of this chamber's dome (in the water
+    outside it: a neighbour's dome, a time stamp burned into the frames, debris), or None when there is none.
 
-    The dome's face is a connected piece of ``on`` holding the outermost samples of the rays within
-    ``_POLE_RAYS`` of the pole.  Another piece that reaches the field's side edges, on whose rays that piece lies
-    further in (a ray from the rim plane's centre crosses the dome's face once: the ray met the other thing
-    first), is a neighbouring well's dome (its well beyond the field, so no bounds are known) or dust on one.
-    Measured: wells 3 radii apart in a 1000 px field, their domes came in at the sides and every dome frame of
-    this chamber was traced out to them (poor_fit field_margin, 6-32x the tolerance).  A piece of the dome's own
-    face cut off from the rest at the field's edge has nothing of that piece behind it and stays; with anything
-    at the field's top (a dome out of the field: field_margin's business) or no clear dome at the pole, None.
-    Pieces inside the field are the rays' jumps' business.
+    ``on``: the change above the edge threshold, one row a ray at angle ``phis`` from the rim plane, sampled at
+    ``t`` px from its centre ``centre`` (col, row in the view, ``width`` columns wide), from outside in.  The
+    dome's face is the connected piece of ``on`` that is the outermost on the most rays (at least half of
+    them).  Another piece is in front of it when ``_FRONT_SHARE`` of its samples lie more than ``gap`` px
+    outside the dome's piece on their ray (the film's faces and fringes lie within a film thickness or so of
+    its outer face), or, if it reaches the field's side edges (a neighbour's dome whose well is beyond them),
+    outside it at all: those rays' first edge is sought behind it.  A piece of the dome's own face cut off from
+    the rest has nothing of the dome behind it and stays.  With the dome's piece at the field's top (a dome out
+    of the field: field_margin's business), None.
+
+    Measured (2026-12-06): wells 3 radii apart in a 1000 px field, their walls beyond it, so no bounds were
+    known: their domes came in at the sides and every dome frame of this chamber was traced out to them
+    (poor_fit field_margin, 5.6-32x the tolerance); a time stamp burned into the frames' top corner (its digits
+    change each frame) took the full search's rays towards it: every dome frame flagged on the 12 looks read by
+    this route (field_margin, gap_length).
     """
     lab, n = ndimage.label(on, structure=np.ones((3, 3), bool))
     if n < 2:
         return None
+    seen = on.any(axis=1)
+    outermost = lab[np.flatnonzero(seen), np.argmax(on[seen], axis=1)]
+    count = np.bincount(outermost, minlength=n + 1)
+    main = int(np.argmax(count))
+    if count[main] < 0.5 * on.shape[0]:
+        return None
+    dome = lab == main
     cols = centre[0] + t[None, :] * np.cos(phis)[:, None]
     rows = centre[1] - t[None, :] * np.sin(phis)[:, None]
-    if np.any(on & (rows < 2.0)):
+    if np.any(dome & (rows < 2.0)):
         return None
-    up = np.flatnonzero(np.abs(phis - 0.5 * np.pi) < _POLE_RAYS)
-    seen = on[up].any(axis=1)
-    if seen.mean() < 0.9:
-        return None
-    tops = lab[up[seen], np.argmax(on[up[seen]], axis=1)]
-    main = np.bincount(tops).argmax()
-    outside = np.setdiff1d(np.unique(lab[on & ((cols < 2.0) | (cols > shape[1] - 3.0))]), [0, main])
-    dome = lab == main
     has, first = dome.any(axis=1), np.argmax(dome, axis=1)  # (the dome's outermost sample on each ray)
-    foreign = np.zeros_like(on)
-    for k in outside:
-        piece = lab == k
-        rays = piece.any(axis=1)
-        inner = piece.shape[1] - 1 - np.argmax(piece[:, ::-1], axis=1)  # (the piece's innermost sample)
-        if np.mean((has & (first > inner))[rays]) >= 0.8:
-            foreign |= piece
-    return foreign if foreign.any() else None
+    lead = np.where(has[:, None], first[:, None] - np.arange(on.shape[1])[None, :], -1)  # (samples ahead of it)
+    pieces = np.arange(1, n + 1)
+    far = ndimage.mean(lead > gap / abs(float(t[1] - t[0])), lab, index=pieces) >= _FRONT_SHARE
+    ahead = ndimage.mean(lead > 0, lab, index=pieces) >= _FRONT_SHARE
+    side = ndimage.maximum(on & ((cols < 2.0) | (cols > width - 3.0)), lab, index=pieces) > 0
+    front = pieces[(far | (side & ahead)) & (pieces != main)]
+    return np.isin(lab, front) if front.size else None
 
 
 def _mad(v):
@@ -1154,8 +1158,9 @@ class SilhouetteTracer:
             self.polarity = int(-np.sign(np.median(np.sign(extreme[strength > 10.0 * noise]))))  # +1: darker
         sign = -float(self.polarity)
         te, found, jump, thr, figs = _first_edges(v, t, sign, noise)
-        foreign = _from_outside(np.clip(sign * v, 0.0, None) > thr, phis, t, (w.axis_col, w.top_row), self.view_shape)
-        if foreign is not None:  # (each ray's first edge behind what came in from the field's edge)
+        foreign = _in_front(np.clip(sign * v, 0.0, None) > thr, phis, t, (w.axis_col, w.top_row),
+                            self.view_shape[1], _FRONT_L0 * self.l0)
+        if foreign is not None:  # (each ray's first edge behind what lies in front of the dome)
             te, found, jump, _, more = _first_edges(np.where(foreign, 0.0, v), t, sign, noise)
             figs["edge_sign"] = more["edge_sign"]
         good = found & ~jump

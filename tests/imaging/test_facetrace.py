@@ -165,14 +165,18 @@ def test_the_points_scatter_sets_the_faces_smoothing():
     assert _scatter(np.arange(4.0), np.zeros(4)) == 0.0
 
 
-def test_what_came_in_from_the_field_edge_is_told_from_the_dome():
-    """_from_outside on the full search's rays (as _rays samples them: 361 rays from the rim plane's centre, from
-    outside in): a dome's face of radius 250 px, a neighbour's dome coming in at the field's right edge (its well
-    beyond it), a speck inside the field.  Only the neighbour's samples are returned; a dome grown out of the field
-    itself, or one touching the neighbour, is not foreign."""
-    from osmobulge.imaging._facetrace import _from_outside
+def test_what_lies_in_front_of_the_dome_is_told_from_it():
+    """_in_front on the full search's rays (as _rays samples them: 361 rays from the rim plane's centre, from
+    outside in): a dome's face of radius 250 px; a neighbour's dome coming in at the field's right edge (its well
+    beyond it), a time stamp's digits in the top corner and a speck, all in the water outside the dome, are
+    returned.  A film's second face 25 px inside its outer face (a film of 25 px: nearer than 2 l0) is not, nor a
+    piece of the face cut off from the rest, nor anything when the dome is out of the field's top or touches the
+    neighbour."""
+    from scipy import ndimage
 
-    shape, centre = (860, 1000), (500.0, 600.0)
+    from osmobulge.imaging._facetrace import _in_front
+
+    shape, centre, l0 = (860, 1000), (500.0, 600.0), 25.0
     phis = np.linspace(np.radians(1.0), np.pi - np.radians(1.0), 361)
     t = np.arange(800.0, 0.0, -1.0)
     cols = centre[0] + t[None, :] * np.cos(phis)[:, None]
@@ -182,21 +186,35 @@ def test_what_came_in_from_the_field_edge_is_told_from_the_dome():
     def ring(c, r, radius, half=2.5):
         return inside & (np.abs(np.hypot(cols - c, rows - r) - radius) < half)
 
+    def front(on):
+        return _in_front(on, phis, t, centre, shape[1], 2.0 * l0)
+
     dome, neighbour = ring(500.0, 600.0, 250.0), ring(1150.0, 600.0, 200.0)
     speck = inside & (np.hypot(cols - 800.0, rows - 300.0) < 5.0)
-    assert neighbour.sum() > 100 and speck.sum() > 5
-    got = _from_outside(dome | neighbour | speck, phis, t, centre, shape)
-    np.testing.assert_array_equal(got, neighbour)
-    assert _from_outside(dome | speck, phis, t, centre, shape) is None
-    # this chamber's own dome out of the field at the sides: still its dome (field_margin's business)
-    assert _from_outside(ring(500.0, 600.0, 520.0) | speck, phis, t, centre, shape) is None
-    # ... nor a piece of its face cut off from the rest at the field's edge (nothing of the dome behind it)
-    cut = ring(500.0, 600.0, 520.0) & ~((rows > 300.0) & (rows < 310.0))
-    assert _from_outside(cut, phis, t, centre, shape) is None
-    # ... nor a dome out of the field's top, whatever came in at the sides
-    assert _from_outside(ring(500.0, 700.0, 720.0) | neighbour, phis, t, centre, shape) is None
+    digits = np.zeros_like(inside)
+    for k in range(6):  # (six digits 20 px wide, 36 high, 30 px apart, 10 px below the top)
+        digits |= inside & (np.abs(cols - (700.0 + 30 * k)) < 10.0) & (rows > 10.0) & (rows < 46.0)
+    assert neighbour.sum() > 100 and speck.sum() > 5 and digits.sum() > 100
+    np.testing.assert_array_equal(front(dome | neighbour | speck | digits), neighbour | speck | digits)
+    assert front(dome) is None
+    # a neighbour at the field's side nearer than 2 l0 (its dome 30 px from this one): still in front
+    near = ring(1030.0, 600.0, 250.0)
+    assert near.sum() > 100
+    np.testing.assert_array_equal(front(dome | near), near)
+    # ... but not a speck in the field that near
+    close = inside & (np.hypot(cols - 500.0, rows - 320.0) < 5.0)
+    assert close.sum() > 5 and front(dome | close) is None
+    # the film's two faces: the inner one is no foreign thing in front of it, whichever piece is the dome's
+    inner = ring(500.0, 600.0, 225.0)
+    assert front(dome | inner) is None
+    assert front((dome & (rows > 560.0) & (cols > 500.0)) | inner) is None  # (the inner face outermost on most)
+    # a piece of the face cut off from the rest: nothing of the dome behind it
+    cut = dome & ~((rows > 560.0) & (rows < 570.0) & (cols > 500.0))
+    assert ndimage.label(cut, np.ones((3, 3)))[1] == 2 and front(cut) is None
+    # a dome out of the field's top: field_margin's business, whatever is in front
+    assert front(ring(500.0, 700.0, 720.0) | speck) is None
     # a neighbour touching the dome is one piece with it: not told apart here (touching is flagged elsewhere)
-    assert _from_outside(dome | ring(1150.0, 600.0, 402.0, 4.0), phis, t, centre, shape) is None
+    assert front(dome | ring(1150.0, 600.0, 402.0, 4.0)) is None
 
 
 def test_the_least_bend_of_a_dome_and_of_a_flat_topped_one():
@@ -994,7 +1012,7 @@ def test_neighbours_whose_wells_lie_beyond_the_field_are_not_taken_for_the_dome(
     no bounds are known, and their domes come in at the sides as they grow.  The full search's low rays met them
     first and the trace ran out to the field's edges: every dome frame was poor_fit (field_margin), 5.7-29x the
     tolerance off.  The pieces that came in at the sides, with this dome's face behind them on their rays, are
-    passed over (_from_outside): the frames are read, within 0.02 of the tolerance."""
+    passed over (_in_front): the frames are read, within 0.02 of the tolerance."""
     a = 200e-6
     vt = [0.0, 0.5, 1.0, 2.2]
     nu = replace(LOOKS["edge_dark"].nuisances, neighbours=((-3.0 * a, 0.8), (3.0 * a, 0.8)))
@@ -1010,6 +1028,38 @@ def test_neighbours_whose_wells_lie_beyond_the_field_are_not_taken_for_the_dome(
     sc = score(s.truth, ds)
     assert list(ds.flag.values) == ["ok"] * 4, ds.message.values
     assert np.all(np.abs(sc["dv_tol"]) < 0.1) and sc["n_silent"] == 0
+
+
+def _burn_in_stamp(frames, times, corner="tr"):
+    """The frames with a time stamp burned in (white digits 36 px high, 10-12 px from the field's corner), as a
+    microscope's export with annotations writes them: its digits change from frame to frame."""
+    from PIL import Image, ImageDraw, ImageFont
+
+    font = ImageFont.load_default(size=36)
+    out = []
+    for f, t in zip(frames, times, strict=True):
+        im = Image.fromarray(np.asarray(f)).convert("I")
+        d = ImageDraw.Draw(im)
+        text = f"{int(t) // 3600:02d}:{int(t) % 3600 // 60:02d}:{int(t) % 60:02d}  t={t / 60:.0f} min"
+        x = 12 if corner[1] == "l" else f.shape[1] - 12 - int(d.textlength(text, font=font))
+        d.text((x, 10 if corner[0] == "t" else f.shape[0] - 50), text, fill=int(np.iinfo(f.dtype).max), font=font)
+        out.append(np.asarray(im).astype(f.dtype))
+    return np.stack(out)
+
+
+@pytest.mark.parametrize("corner", ["tl", "tr"])
+def test_a_time_stamp_burned_into_the_frames_is_not_taken_for_the_dome(edge_dark, corner):
+    """A time stamp in a top corner of the frames (a microscope's export with annotations): its digits change
+    from frame to frame, so the change shows them in the water above the dome, and the full search's rays
+    towards them took them for the dome's edge: every dome frame was flagged (field_margin, gap_length), on the
+    12 looks read by this route, in either top corner.  They lie in front of the dome on their rays
+    (_in_front): the frames are read as without the stamp."""
+    times = 600.0 * np.arange(len(VT))
+    stamped = edge_dark.__class__(_burn_in_stamp(edge_dark.frames, times, corner), edge_dark.truth)
+    ds, plain = _extract(stamped), _extract(edge_dark)
+    assert list(ds.flag.values) == ["ok"] * len(VT), ds.message.values
+    np.testing.assert_allclose(ds.volume.values, plain.volume.values, rtol=2e-3, atol=1e-15)
+    assert score(stamped.truth, ds)["n_silent"] == 0
 
 
 def test_a_blank_or_partly_blank_frame_says_so(edge_dark):
