@@ -23,7 +23,9 @@ optics model as well: the film delaminated in frame ``n // 3`` and torn in
 frames ``n // 2`` and ``n - 2`` (``gap``: a piece of ``fracture_gap`` 0.15 of the
 arc, on a side or over the pole as the seed falls; ``polar``: 0.4, always the
 cap; ``collapsed``: the dome torn away); the "events flagged" column then counts
-them, and a frame after an event must be read again.
+them, and a frame after an event must be read again.  ``--stamp tl|tr|bl|br``
+burns a time stamp into that corner of every frame (and a scale bar into a
+bottom one), as a microscope's export with annotations does.
 """
 
 from __future__ import annotations
@@ -50,9 +52,11 @@ def _events(name, n, mode):
     return replace(look.nuisances, delaminated_frames=(n // 3,), fractured_frames=(n // 2, n - 2), **torn)
 
 
-def row(name, vt, events=None):
+def row(name, vt, events=None, stamp="none"):
     t0 = time.perf_counter()
-    extra = {} if events is None else {"nuisances": _events(name, len(vt), events)}
+    look = LOOKS.get(name) or HELD_OUT_LOOKS.get(name) or OUTSIDE_LOOKS[name]
+    nuisances = look.nuisances if events is None else _events(name, len(vt), events)
+    extra = {} if events is None and stamp == "none" else {"nuisances": replace(nuisances, time_stamp=stamp)}
     s = render_look(name, vt, lambda_pre=PRE, **extra)
     t_render = time.perf_counter() - t0
     a, h, l0 = (s.truth.attrs[k] for k in ("chamber_radius", "chamber_depth", "membrane_thickness"))
@@ -79,6 +83,8 @@ def main():
     ap.add_argument("--held-out-only", action="store_true")
     ap.add_argument("--events", choices=("gap", "polar", "collapsed"),
                     help="draw a delaminated and two torn frames in each look (see the module's docstring)")
+    ap.add_argument("--stamp", choices=("none", "tl", "tr", "bl", "br"), default="none",
+                    help="burn a time stamp into that corner of every frame and a scale bar into a bottom one")
     args = ap.parse_args()
     vt = np.linspace(0.0, 4.0, args.frames) ** 1.5 / 2.0
     head = ("| look                 | route | worst dV/tol (ok) | V ok | rim bias px (median) | worst rim px |"
@@ -90,10 +96,11 @@ def main():
         groups.append(("outside the method (must be refused with a reason)", OUTSIDE_LOOKS))
     for title, looks in groups:
         events = "" if args.events is None else f" (events: {args.events})"
+        events += "" if args.stamp == "none" else f" (time stamp: {args.stamp})"
         print(f"\n## {title}{events}: Vtilde {', '.join(f'{x:.2f}' for x in vt)}\n")
         print(head)
         for name in looks:
-            print(row(name, vt, args.events), flush=True)
+            print(row(name, vt, args.events, args.stamp), flush=True)
 
 
 if __name__ == "__main__":

@@ -305,6 +305,25 @@ HELD_OUT_LOOKS: dict[str, Look] = {
                 bit_depth=10, neighbours=((-380e-6, 0.8), (380e-6, 1.2))),
         chamber=(140e-6, 110e-6, 20e-6), pixel_size=0.9e-6, seed=114,
     ),
+    # added 2026-12-06 (stop 37) after the full search learnt to pass over what lies in front of the dome
+    # (_facetrace._in_front: neighbours whose walls lie beyond the field, a burned-in time stamp), with both:
+    # ho_blind_1206t, neighbours 3.3 radii off each side (their walls just beyond the field's edges, their domes
+    # coming in), a stamp top left; ho_blind_1206u, the dome growing down (the stamp, bottom left in the image,
+    # lies above the dome in the tracer's view), inverted display, 8 bits, dust, drift
+    "ho_blind_1206t": Look(
+        Optics(n_elastomer=1.41, n_liquid=1.355, objective_na=0.3, condenser_na=0.1, defocus=-4e-6,
+               halo_strength=0.2),
+        replace(_N, noise_sigma=0.01, blur_sigma=0.6, drift_sigma=0.4, exposure_sigma=0.05, dust_count=10,
+                bit_depth=12, neighbours=((-3.3 * 170e-6, 0.9), (3.3 * 170e-6, 1.1)), time_stamp="tl"),
+        chamber=(170e-6, 110e-6, 22e-6), pixel_size=0.75e-6, seed=115,
+    ),
+    "ho_blind_1206u": Look(
+        Optics(n_elastomer=1.425, n_liquid=1.35, objective_na=0.25, condenser_na=0.12, defocus=3e-6,
+               halo_strength=0.35, halo_width=4e-6),
+        replace(_N, noise_sigma=0.012, blur_sigma=0.8, drift_sigma=0.6, dust_count=20, bit_depth=8, polarity=-1,
+                time_stamp="bl"),
+        chamber=(150e-6, 110e-6, 24e-6), pixel_size=0.8e-6, seed=116, scene=SceneGeometry(bulge_direction="down"),
+    ),
 }
 
 

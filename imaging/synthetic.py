@@ -25,8 +25,9 @@ thousandths of a pixel.
 
 Nuisances (:class:`Nuisances`) are all parameters: contrast of either sign,
 uneven illumination, 8- to 16-bit output, Gaussian and Poisson noise, blur,
-tilt, random-walk stage drift, dust, neighbouring chambers, and frames
-rendered delaminated, fractured or touching a neighbour's bulge.
+tilt, random-walk stage drift, dust, neighbouring chambers, frames
+rendered delaminated, fractured or touching a neighbour's bulge, and a time
+stamp and scale bar burned in as a microscope's export with annotations does.
 
 Default field
 -------------
@@ -69,6 +70,7 @@ __all__ = [
 BULGE_DIRECTIONS = ("up", "down", "left", "right")
 FLAGS = ("ok", "delaminated", "fractured", "touching")
 FRACTURE_MODES = ("gap", "collapsed")
+TIME_STAMPS = ("none", "tl", "tr", "bl", "br")
 BIT_DEPTHS = (8, 10, 12, 14, 16)
 #: the paper's reference chamber (main text Sec. 3.1): radius, depth, membrane thickness (m)
 REFERENCE_CHAMBER = (200e-6, 110e-6, 20e-6)
@@ -193,6 +195,13 @@ class Nuisances:
         and two torn flaps hang from the rims into the well.
     fracture_gap : float
         Length of the missing piece as a fraction of the dome's arc length.
+    time_stamp : {"none", "tl", "tr", "bl", "br"}
+        Annotations burned into every frame, as a microscope's export with
+        annotations writes them: the time since the first frame
+        (``hh:mm:ss.000  t = m min``, white: the bit depth's full scale, a 28th
+        of the frame's height, 10 px from the edges) in that corner of the stored image, its digits changing from
+        frame to frame, and a 100 um scale bar with its label in the other
+        bottom corner (the bottom right for a stamp on the left).
     """
 
     polarity: int = 1
@@ -219,6 +228,7 @@ class Nuisances:
     delamination_gap: float = 1.5
     fracture_mode: str = "gap"
     fracture_gap: float = 0.15
+    time_stamp: str = "none"
 
     def __post_init__(self):
         if self.polarity not in (1, -1):
@@ -227,6 +237,8 @@ class Nuisances:
             raise ValueError(f"bit_depth must be one of {BIT_DEPTHS}, got {self.bit_depth!r}")
         if self.fracture_mode not in FRACTURE_MODES:
             raise ValueError(f"fracture_mode must be one of {FRACTURE_MODES}, got {self.fracture_mode!r}")
+        if self.time_stamp not in TIME_STAMPS:
+            raise ValueError(f"time_stamp must be one of {TIME_STAMPS}, got {self.time_stamp!r}")
         ranges = {
             "contrast": (1e-3, 10.0),
             "illumination_gradient": (0.0, 0.9),
@@ -683,6 +695,29 @@ def _finish(img, nuis: Nuisances, illum, dust, rng, gain=1.0):
     return out.astype(dtype)
 
 
+def _stamp(frame, t, corner, pixel_size, bit_depth):
+    """``frame`` with the time ``t`` (s) burned into ``corner`` and a 100 um scale bar with its label in the
+    other bottom corner, white (full scale of ``bit_depth``), as a microscope's export with annotations
+    (:class:`Nuisances` ``time_stamp``)."""
+    from PIL import Image, ImageDraw, ImageFont
+
+    rows, cols = frame.shape
+    font = ImageFont.load_default(size=max(10, round(rows / 28)))
+    white = 2 ** int(bit_depth) - 1
+    im = Image.fromarray(frame.astype(np.int32))  # (mode "I")
+    d = ImageDraw.Draw(im)
+    t = int(round(t))
+    text = f"{t // 3600:02d}:{t % 3600 // 60:02d}:{t % 60:02d}.000  t = {t / 60:.0f} min"
+    size = font.size
+    x = 10 if corner[1] == "l" else cols - 10 - int(d.textlength(text, font=font))
+    d.text((x, 10 if corner[0] == "t" else rows - 10 - 1.3 * size), text, fill=white, font=font)
+    bar = int(round(100e-6 / pixel_size))
+    x = cols - 10 - bar if corner[1] == "l" else 10
+    d.rectangle([x, rows - 10 - size // 4, x + bar, rows - 10], fill=white)
+    d.text((x, rows - 14 - size // 4 - 1.3 * size), "100 um", fill=white, font=font)
+    return np.asarray(im).astype(frame.dtype)
+
+
 # --------------------------------------------------------------------------------------
 # public API
 # --------------------------------------------------------------------------------------
@@ -999,6 +1034,8 @@ def render_series(
             img = sc.render_optical(fr, drift[i], optics, nuis.blur_sigma)
         rng_noise = np.random.default_rng(np.random.SeedSequence(int(seed), spawn_key=(7, i)))
         frames[i] = _finish(img, nuis, illum, dust, rng_noise, float(gains[i]))
+        if nuis.time_stamp != "none":
+            frames[i] = _stamp(frames[i], times[i] - times[0], nuis.time_stamp, p, nuis.bit_depth)
 
     truth = _truth(
         v,

@@ -1030,23 +1030,6 @@ def test_neighbours_whose_wells_lie_beyond_the_field_are_not_taken_for_the_dome(
     assert np.all(np.abs(sc["dv_tol"]) < 0.1) and sc["n_silent"] == 0
 
 
-def _burn_in_stamp(frames, times, corner="tr"):
-    """The frames with a time stamp burned in (white digits 36 px high, 10-12 px from the field's corner), as a
-    microscope's export with annotations writes them: its digits change from frame to frame."""
-    from PIL import Image, ImageDraw, ImageFont
-
-    font = ImageFont.load_default(size=36)
-    out = []
-    for f, t in zip(frames, times, strict=True):
-        im = Image.fromarray(np.asarray(f)).convert("I")
-        d = ImageDraw.Draw(im)
-        text = f"{int(t) // 3600:02d}:{int(t) % 3600 // 60:02d}:{int(t) % 60:02d}  t={t / 60:.0f} min"
-        x = 12 if corner[1] == "l" else f.shape[1] - 12 - int(d.textlength(text, font=font))
-        d.text((x, 10 if corner[0] == "t" else f.shape[0] - 50), text, fill=int(np.iinfo(f.dtype).max), font=font)
-        out.append(np.asarray(im).astype(f.dtype))
-    return np.stack(out)
-
-
 @pytest.mark.parametrize("corner", ["tl", "tr"])
 def test_a_time_stamp_burned_into_the_frames_is_not_taken_for_the_dome(edge_dark, corner):
     """A time stamp in a top corner of the frames (a microscope's export with annotations): its digits change
@@ -1054,8 +1037,12 @@ def test_a_time_stamp_burned_into_the_frames_is_not_taken_for_the_dome(edge_dark
     towards them took them for the dome's edge: every dome frame was flagged (field_margin, gap_length), on the
     12 looks read by this route, in either top corner.  They lie in front of the dome on their rays
     (_in_front): the frames are read as without the stamp."""
-    times = 600.0 * np.arange(len(VT))
-    stamped = edge_dark.__class__(_burn_in_stamp(edge_dark.frames, times, corner), edge_dark.truth)
+    from osmobulge.imaging.synthetic import _stamp  # (what Nuisances(time_stamp=corner) burns in)
+
+    p = edge_dark.truth.attrs["pixel_size"]
+    bits = edge_dark.truth.attrs["bit_depth"]
+    frames = [_stamp(np.asarray(f), 600.0 * i, corner, p, bits) for i, f in enumerate(edge_dark.frames)]
+    stamped = edge_dark.__class__(np.stack(frames), edge_dark.truth)
     ds, plain = _extract(stamped), _extract(edge_dark)
     assert list(ds.flag.values) == ["ok"] * len(VT), ds.message.values
     np.testing.assert_allclose(ds.volume.values, plain.volume.values, rtol=2e-3, atol=1e-15)
@@ -1180,3 +1167,22 @@ def test_wells_each_side_and_dust_on_the_way_to_them():
     sc = score(s.truth, ds)
     assert list(ds.flag.values) == ["ok"] * 3 and sc["n_silent"] == 0 and np.all(sc["dv_tol"] <= 1.0), sc["dv_tol"]
     assert np.all(np.abs(sc["rim_bias_px"]) < 0.5)
+
+
+def test_annotations_at_the_words_full_scale_are_not_the_light():
+    """A 12-bit camera's frames in 16-bit words with a time stamp burned in at 65535 (annotations drawn at the
+    words' full scale): the background was 1.8-4.2 % of that white on the held-out 12-bit looks, and the frames
+    were refused as dark field.  A level more than twice any other pixel's is no light: left out."""
+    from osmobulge.imaging.synthetic import _stamp
+
+    s = render_look("edge_dark", [0.0], shape=SHAPE, nuisances=replace(LOOKS["edge_dark"].nuisances, bit_depth=12))
+    f = np.asarray(s.frames[0])
+    assert f.dtype == np.uint16 and f.max() <= 4095
+    white = _stamp(f, 3600.0, "tr", s.truth.attrs["pixel_size"], 16)
+    assert np.mean(white[::2, ::2] == 65535) > 0.002  # (more than the 99.9th percentile's share)
+    ratio, why = dark_background(white)
+    assert why == "" and ratio == pytest.approx(dark_background(f)[0], rel=0.02)
+    # ... but dark field (a dark background, bright zones) stays refused, with the stamp too
+    d = render_look("dark_field", [0.5], shape=SHAPE)
+    assert d.truth.attrs["bit_depth"] == 16
+    assert dark_background(_stamp(np.asarray(d.frames[0]), 0.0, "tl", d.truth.attrs["pixel_size"], 16))[1] != ""

@@ -578,3 +578,33 @@ def test_exposure_changes_scale_each_frames_light_and_nothing_else():
         np.testing.assert_allclose(b[ok], a[ok] * g[i], atol=0.5 * (1.0 + g[i]) + 1e-3)  # (two roundings)
     with pytest.raises(ValueError, match="exposure_sigma"):
         Nuisances(exposure_sigma=0.8)
+
+
+def test_a_time_stamp_is_burned_into_its_corner_and_nowhere_else():
+    """Nuisances(time_stamp=corner): white text (the time since the first frame) in that corner, different in
+    every frame, a static scale bar 100 um long in the other bottom corner; every other pixel as rendered
+    without them."""
+    times = [0.0, 3600.0 + 23 * 60 + 5]  # (00:00:00, 01:23:05)
+    plain = render_series([0.0, 0.5], times=times, nuisances=Nuisances(noise_sigma=0.01), **SMALL)
+    s = render_series([0.0, 0.5], times=times, nuisances=Nuisances(noise_sigma=0.01, time_stamp="tr"), **SMALL)
+    f, g = np.asarray(s.frames), np.asarray(plain.frames)
+    full = np.iinfo(f.dtype).max
+    changed = f != g
+    rows, cols = f.shape[1:]
+    r, c = np.nonzero(changed[1])
+    # the stamp's text within a band at the top right, and the bar with its label at the bottom left
+    top = (r < rows // 4) & (c > cols // 2)
+    bottom = (r > rows * 3 // 4) & (c < cols // 2)
+    assert np.all(top | bottom) and top.sum() > 50 and bottom.sum() > 50
+    assert np.all(f[changed] > 0.5 * full) and np.any(f[changed] == full)
+    # the digits differ between the frames; the bar does not
+    assert np.any(changed[0][: rows // 4] != changed[1][: rows // 4])
+    np.testing.assert_array_equal(changed[0][rows * 3 // 4 :], changed[1][rows * 3 // 4 :])
+    bar_rows = np.flatnonzero(np.all(f[0][:, 10 : 10 + round(100e-6 / s.truth.attrs["pixel_size"])] == full, axis=1))
+    assert bar_rows.size >= 2 and bar_rows.min() > rows * 3 // 4
+    assert s.truth.attrs["nuisance_time_stamp"] == "tr"
+    # white is the bit depth's full scale (a 12-bit camera's frames in 16-bit words)
+    s12 = render_series([0.0], nuisances=Nuisances(bit_depth=12, time_stamp="bl"), **SMALL)
+    assert s12.frames.dtype == np.uint16 and s12.frames.max() == 4095
+    with pytest.raises(ValueError, match="time_stamp must be one of"):
+        Nuisances(time_stamp="top")
