@@ -309,7 +309,10 @@ HELD_OUT_LOOKS: dict[str, Look] = {
     # (_facetrace._in_front: neighbours whose walls lie beyond the field, a burned-in time stamp), with both:
     # ho_blind_1206t, neighbours 3.3 radii off each side (their walls just beyond the field's edges, their domes
     # coming in), a stamp top left; ho_blind_1206u, the dome growing down (the stamp, bottom left in the image,
-    # lies above the dome in the tracer's view), inverted display, 8 bits, dust, drift
+    # lies above the dome in the tracer's view), inverted display, 8 bits, dust, drift.  Measured once, blind (9
+    # frames, Vtilde 0..4): 1206t 0 flagged, 0 silent, worst volume error 0.03 of the tolerance, rim within 0.09
+    # px, lambda_pre within 0.02 %; 1206u 0 flagged, 0 silent, worst 0.07, rim within 0.26 px, lambda_pre within
+    # 0.09 % (the code before, f1c7876: every dome frame of both flagged, 4-330x off)
     "ho_blind_1206t": Look(
         Optics(n_elastomer=1.41, n_liquid=1.355, objective_na=0.3, condenser_na=0.1, defocus=-4e-6,
                halo_strength=0.2),

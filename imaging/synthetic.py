@@ -198,10 +198,11 @@ class Nuisances:
     time_stamp : {"none", "tl", "tr", "bl", "br"}
         Annotations burned into every frame, as a microscope's export with
         annotations writes them: the time since the first frame
-        (``hh:mm:ss.000  t = m min``, white: the bit depth's full scale, a 28th
-        of the frame's height, 10 px from the edges) in that corner of the stored image, its digits changing from
-        frame to frame, and a 100 um scale bar with its label in the other
-        bottom corner (the bottom right for a stamp on the left).
+        (``hh:mm:ss.000  t = m min``, white: the bit depth's full scale, a
+        28th of the frame's height, 10 px from the edges) in that corner of
+        the stored image, its digits changing from frame to frame, and a
+        100 um scale bar with its label in the other bottom corner (the bottom
+        right for a stamp on the left).
     """
 
     polarity: int = 1
