@@ -44,20 +44,18 @@ from osmobulge.modeling.transport import Chamber
 PRE = PreStretch(0.01, 0.0)
 
 
-def _events(name, n, mode):
-    """The look's nuisances with the events of ``--events mode`` in a series of n frames."""
+def _nuisances(name, n, events=None, stamp="none"):
+    """The look's nuisances with the events of ``--events`` in a series of n frames and the ``--stamp``."""
     look = LOOKS.get(name) or HELD_OUT_LOOKS.get(name) or OUTSIDE_LOOKS[name]
-    torn = {"gap": {"fracture_gap": 0.15}, "polar": {"fracture_gap": 0.4},
-            "collapsed": {"fracture_mode": "collapsed"}}[mode]
-    return replace(look.nuisances, delaminated_frames=(n // 3,), fractured_frames=(n // 2, n - 2), **torn)
+    torn = {} if events is None else {"delaminated_frames": (n // 3,), "fractured_frames": (n // 2, n - 2), **{
+        "gap": {"fracture_gap": 0.15}, "polar": {"fracture_gap": 0.4},
+        "collapsed": {"fracture_mode": "collapsed"}}[events]}
+    return replace(look.nuisances, time_stamp=stamp, **torn)
 
 
 def row(name, vt, events=None, stamp="none"):
     t0 = time.perf_counter()
-    look = LOOKS.get(name) or HELD_OUT_LOOKS.get(name) or OUTSIDE_LOOKS[name]
-    nuisances = look.nuisances if events is None else _events(name, len(vt), events)
-    extra = {} if events is None and stamp == "none" else {"nuisances": replace(nuisances, time_stamp=stamp)}
-    s = render_look(name, vt, lambda_pre=PRE, **extra)
+    s = render_look(name, vt, lambda_pre=PRE, nuisances=_nuisances(name, len(vt), events, stamp))
     t_render = time.perf_counter() - t0
     a, h, l0 = (s.truth.attrs[k] for k in ("chamber_radius", "chamber_depth", "membrane_thickness"))
     t0 = time.perf_counter()

@@ -697,9 +697,9 @@ def _finish(img, nuis: Nuisances, illum, dust, rng, gain=1.0):
 
 
 def _stamp(frame, t, corner, pixel_size, bit_depth):
-    """``frame`` with the time ``t`` (s) burned into ``corner`` and a 100 um scale bar with its label in the
-    other bottom corner, white (full scale of ``bit_depth``), as a microscope's export with annotations
-    (:class:`Nuisances` ``time_stamp``)."""
+    """``frame`` (stored orientation) with the time ``t`` (s) burned into ``corner`` ("tl", "tr", "bl" or "br")
+    and a 100 um scale bar (``pixel_size`` in m) with its label in the other bottom corner, white (full scale
+    of ``bit_depth``), as a microscope's export with annotations (:class:`Nuisances` ``time_stamp``)."""
     from PIL import Image, ImageDraw, ImageFont
 
     rows, cols = frame.shape
