@@ -25,7 +25,10 @@ arc, on a side or over the pole as the seed falls; ``polar``: 0.4, always the
 cap; ``collapsed``: the dome torn away); the "events flagged" column then counts
 them, and a frame after an event must be read again.  ``--stamp tl|tr|bl|br``
 burns a time stamp into that corner of every frame (and a scale bar into a
-bottom one), as a microscope's export with annotations does.
+bottom one), as a microscope's export with annotations does.  ``--focus-drift UM``
+moves the focal plane by that much from the first frame to the last (the painted
+looks have none: unchanged), and ``--dilution`` dilutes the salt solution by the
+water that came in (``Optics.dilution``).
 """
 
 from __future__ import annotations
@@ -44,18 +47,28 @@ from osmobulge.modeling.transport import Chamber
 PRE = PreStretch(0.01, 0.0)
 
 
-def _nuisances(name, n, events=None, stamp="none"):
-    """The look's nuisances with the events of ``--events`` in a series of n frames and the ``--stamp``."""
-    look = LOOKS.get(name) or HELD_OUT_LOOKS.get(name) or OUTSIDE_LOOKS[name]
+def _look(name):
+    return LOOKS.get(name) or HELD_OUT_LOOKS.get(name) or OUTSIDE_LOOKS[name]
+
+
+def _nuisances(name, n, events=None, stamp="none", focus_drift=0.0):
+    """The look's nuisances with the events of ``--events`` in a series of n frames, the ``--stamp`` and the
+    ``--focus-drift`` (m; none for a painted look)."""
+    look = _look(name)
     torn = {} if events is None else {"delaminated_frames": (n // 3,), "fractured_frames": (n // 2, n - 2), **{
         "gap": {"fracture_gap": 0.15}, "polar": {"fracture_gap": 0.4},
         "collapsed": {"fracture_mode": "collapsed"}}[events]}
-    return replace(look.nuisances, time_stamp=stamp, **torn)
+    focus = focus_drift if look.optics is not None else 0.0
+    return replace(look.nuisances, time_stamp=stamp, focus_drift=focus, **torn)
 
 
-def row(name, vt, events=None, stamp="none"):
+def row(name, vt, events=None, stamp="none", focus_drift=0.0, dilution=False):
     t0 = time.perf_counter()
-    s = render_look(name, vt, lambda_pre=PRE, nuisances=_nuisances(name, len(vt), events, stamp))
+    optics = _look(name).optics
+    if optics is not None and dilution:
+        optics = replace(optics, dilution=True)
+    s = render_look(name, vt, lambda_pre=PRE, nuisances=_nuisances(name, len(vt), events, stamp, focus_drift),
+                    optics=optics)
     t_render = time.perf_counter() - t0
     a, h, l0 = (s.truth.attrs[k] for k in ("chamber_radius", "chamber_depth", "membrane_thickness"))
     t0 = time.perf_counter()
@@ -83,6 +96,10 @@ def main():
                     help="draw a delaminated and two torn frames in each look (see the module's docstring)")
     ap.add_argument("--stamp", choices=("none", "tl", "tr", "bl", "br"), default="none",
                     help="burn a time stamp into that corner of every frame and a scale bar into a bottom one")
+    ap.add_argument("--focus-drift", type=float, default=0.0, metavar="UM",
+                    help="the focal plane's travel (um) from the first frame to the last (optics looks)")
+    ap.add_argument("--dilution", action="store_true",
+                    help="the salt solution diluted by the water that came in (optics looks)")
     args = ap.parse_args()
     vt = np.linspace(0.0, 4.0, args.frames) ** 1.5 / 2.0
     head = ("| look                 | route | worst dV/tol (ok) | V ok | rim bias px (median) | worst rim px |"
@@ -95,10 +112,12 @@ def main():
     for title, looks in groups:
         events = "" if args.events is None else f" (events: {args.events})"
         events += "" if args.stamp == "none" else f" (time stamp: {args.stamp})"
+        events += "" if args.focus_drift == 0.0 else f" (focus drift: {args.focus_drift:+g} um)"
+        events += " (liquid diluted)" if args.dilution else ""
         print(f"\n## {title}{events}: Vtilde {', '.join(f'{x:.2f}' for x in vt)}\n")
         print(head)
         for name in looks:
-            print(row(name, vt, args.events, args.stamp), flush=True)
+            print(row(name, vt, args.events, args.stamp, args.focus_drift * 1e-6, args.dilution), flush=True)
 
 
 if __name__ == "__main__":

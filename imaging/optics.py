@@ -93,6 +93,13 @@ class Optics:
         Image level of undisturbed light (leaves room for bright fringes).
     oversample : int
         Sub-samples per pixel side.
+    dilution : bool
+        Read by :func:`osmobulge.imaging.synthetic.render_series`: the salt
+        solution is diluted by the water that came in, so ``n_liquid`` and
+        ``absorption_liquid`` are the first frame's and a frame whose volume
+        is ``V/V0 = 1 + Vtilde a/h`` times the well's has ``n_water + (n_liquid
+        - n_water) V0/V`` and ``absorption_liquid V0/V`` (index and dye linear
+        in the concentration; the neighbours take the reference chamber's).
     """
 
     n_water: float = 1.333
@@ -111,6 +118,7 @@ class Optics:
     halo_width: float = 3e-6
     brightness: float = 0.7
     oversample: int = 3
+    dilution: bool = False
 
     def __post_init__(self):
         checks = {
@@ -138,10 +146,13 @@ class Optics:
             raise ValueError("condenser_inner_na must not exceed condenser_na")
         if not (isinstance(self.oversample, int) and 1 <= self.oversample <= 8):
             raise ValueError(f"oversample must be an int in [1, 8], got {self.oversample!r}")
+        if not isinstance(self.dilution, bool):
+            raise ValueError(f"dilution must be True or False, got {self.dilution!r}")
 
     def to_attrs(self) -> dict:
         """netCDF-safe attrs (prefixed ``optics_``)."""
-        return {f"optics_{f.name}": getattr(self, f.name) for f in fields(self)}
+        return {f"optics_{f.name}": int(v) if isinstance(v, bool) else v
+                for f in fields(self) for v in [getattr(self, f.name)]}
 
 
 @dataclass(frozen=True)

@@ -43,7 +43,7 @@ from __future__ import annotations
 
 import math
 import warnings
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import asdict, dataclass, field, fields, replace
 
 import numpy as np
 import xarray as xr
@@ -203,6 +203,11 @@ class Nuisances:
         the stored image, its digits changing from frame to frame, and a
         100 um scale bar with its label in the other bottom corner (the bottom
         right for a stamp on the left).
+    focus_drift : float, m
+        The focal plane's travel from the first frame to the last, linear in
+        time (a microscope's focus drifting over a day without autofocus):
+        frame ``i`` is rendered with ``optics.defocus + focus_drift (t_i -
+        t_0)/(t_last - t_0)``.  Optics only.
     """
 
     polarity: int = 1
@@ -230,6 +235,7 @@ class Nuisances:
     fracture_mode: str = "gap"
     fracture_gap: float = 0.15
     time_stamp: str = "none"
+    focus_drift: float = 0.0
 
     def __post_init__(self):
         if self.polarity not in (1, -1):
@@ -255,6 +261,7 @@ class Nuisances:
             "delamination_gap": (0.0, 20.0),
             "fracture_gap": (0.01, 0.9),
             "illumination_angle": (-360.0, 360.0),
+            "focus_drift": (-5e-4, 5e-4),
         }
         for name, (lo, hi) in ranges.items():
             v = getattr(self, name)
@@ -945,6 +952,8 @@ def render_series(
     if not isinstance(nuis, Nuisances):
         raise TypeError(f"nuisances must be a Nuisances, got {type(nuis).__name__}")
     flags = _event_flags(n_t, nuis)
+    if optics is None and nuis.focus_drift != 0.0:
+        raise ValueError("focus_drift needs optics: the painted renderer has no focal plane")
     if optics is not None:
         from osmobulge.imaging.optics import Optics
 
@@ -1032,7 +1041,7 @@ def render_series(
         if optics is None:
             img = sc.render(fr, drift[i], levels, nuis.blur_sigma)
         else:
-            img = sc.render_optical(fr, drift[i], optics, nuis.blur_sigma)
+            img = sc.render_optical(fr, drift[i], _frame_optics(optics, nuis, v[i], times, i, a, h), nuis.blur_sigma)
         rng_noise = np.random.default_rng(np.random.SeedSequence(int(seed), spawn_key=(7, i)))
         frames[i] = _finish(img, nuis, illum, dust, rng_noise, float(gains[i]))
         if nuis.time_stamp != "none":
@@ -1070,6 +1079,19 @@ def render_series(
     if hasattr(chamber, "to_attrs"):  # a modeling Chamber: its loading too (Chamber.from_attrs round-trips)
         truth.attrs.update({k: float(v) for k, v in chamber.to_attrs().items()})
     return SyntheticSeries(frames=frames, truth=truth)
+
+
+def _frame_optics(optics, nuis: Nuisances, vtilde, times, i, a, h):
+    """Frame ``i``'s optics: its focal plane (``nuis.focus_drift``) and, with ``optics.dilution``, its diluted
+    salt solution (:class:`~osmobulge.imaging.optics.Optics`)."""
+    change = {}
+    if nuis.focus_drift != 0.0 and times[-1] != times[0]:
+        change["defocus"] = optics.defocus + nuis.focus_drift * (times[i] - times[0]) / (times[-1] - times[0])
+    if optics.dilution:
+        share = 1.0 / (1.0 + vtilde * a / h)  # (V0/V: the salt's concentration over the first frame's)
+        change["n_liquid"] = optics.n_water + (optics.n_liquid - optics.n_water) * share
+        change["absorption_liquid"] = optics.absorption_liquid * share
+    return replace(optics, **change) if change else optics
 
 
 def _touch(frames_idx, prof, k_near, off, nb_v, nb_prof, a, l0, material, lambda_pre, n_profile):

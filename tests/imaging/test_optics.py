@@ -1,6 +1,7 @@
 """The optics renderer against independent truth: Monte Carlo apertures, sphere chords, silhouettes."""
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -278,6 +279,42 @@ def test_the_optics_image_does_not_depend_on_the_devices_orientation():
             assert at == pytest.approx(lines["up", name][1], abs=1.0), (d, name, lines)
         assert lines[d, "dome"] == pytest.approx(lines["up", "dome"], abs=0.002)
     assert lines["up", "outside"][0] < -0.2 and lines["up", "centre"][0] < -0.4  # (the top face; the lower face)
+
+
+def test_focus_drift_and_dilution_render_each_frame_in_its_own_optics():
+    """Nuisances(focus_drift) moves the focal plane linearly in time from the first frame to the last, and
+    Optics(dilution=True) dilutes the salt solution by the water that came in (index above the water's and the
+    dye's absorption as V0/V, V/V0 the truth's volume_ratio): each frame is the one rendered alone with those
+    optics."""
+    ch, p = (150e-6, 110e-6, 20e-6), 1.6e-6
+    vt, times = [0.0, 1.0, 3.0], [0.0, 1000.0, 3000.0]
+    base = Optics(defocus=2e-6, absorption_liquid=800.0)
+    nu = Nuisances(blur_sigma=0.5)
+    s = render_series(vt, times=times, chamber=ch, pixel_size=p, shape=(420, 400),
+                      optics=replace(base, dilution=True), nuisances=replace(nu, focus_drift=-12e-6))
+    share = 1.0 / s.truth["volume_ratio"].values  # (the concentration over the first frame's)
+    assert share[0] == 1.0 and 0.1 < share[2] < 0.3
+    for i, (v, t) in enumerate(zip(vt, times, strict=True)):
+        alone = replace(base, defocus=2e-6 - 12e-6 * t / 3000.0, n_liquid=1.333 + 0.029 * share[i],
+                        absorption_liquid=800.0 * share[i])
+        one = render_series([v], chamber=ch, pixel_size=p, shape=(420, 400), optics=alone, nuisances=nu)
+        np.testing.assert_array_equal(s.frames[i], one.frames[0])
+    # the dilution alone is seen in the liquid (well and dome: nearer the water's index, its dye paler), not in
+    # the water above the dome
+    kw = {"chamber": ch, "pixel_size": p, "shape": (420, 400), "nuisances": nu}
+    plain = render_series([3.0], optics=base, **kw).frames[0].astype(float)
+    diluted = render_series([3.0], optics=replace(base, dilution=True), **kw)
+    well = int(diluted.truth.rim_y[0]) + 20  # (rows inside the well, below the film)
+    pole = int(diluted.truth.midline_row[0, 0, 0]) - 10  # (the water above the dome's outer face and halo)
+    change = np.abs(diluted.frames[0] - plain) / plain.max()
+    assert change[well : well + 40].mean() > 0.02 and change[:pole].max() == 0.0
+    assert s.truth.attrs["optics_dilution"] == 1 and s.truth.attrs["nuisance_focus_drift"] == -12e-6
+    with pytest.raises(ValueError, match="focus_drift needs optics"):
+        render_series([0.0, 1.0], nuisances=Nuisances(focus_drift=5e-6))
+    with pytest.raises(ValueError, match="focus_drift"):
+        Nuisances(focus_drift=0.01)  # (1 cm: um given as m * 1e4)
+    with pytest.raises(ValueError, match="dilution"):
+        Optics(dilution=1)
 
 
 def test_optics_rejects_bad_input():
