@@ -165,6 +165,9 @@ _SPECK_PX = 8
 #: measured row by row (:meth:`_gap_rows`), each row's a running median over _GAP_ROWS rows (a speck a few rows
 #: high is not a face); the next frame's dome is then searched for up to the middle of that gap on each row
 _NEAR_PX, _GAP_ROWS = 20.0, 15
+#: with no neighbouring well seen, a neighbour's dome coming in at the field's side edges is looked for on a grid of
+#: _SIDE_STEP px over the water above the top face (:meth:`SilhouetteTracer._side_gap`)
+_SIDE_STEP = 2.0
 #: a frame whose base is more than _GAIN_TOL brighter or darker than the first frame's (the lamp, the exposure) is
 #: divided by that ratio first
 _GAIN_TOL = 0.05
@@ -494,6 +497,13 @@ def _in_front(on, phis, t, centre, width, gap):
     return np.isin(lab, front) if front.size else None
 
 
+def _least_distance(points, others):
+    """The least distance between ``others`` (N, 2) and ``points`` (M, 2)."""
+    from scipy.spatial import cKDTree
+
+    return float(np.min(cKDTree(points).query(others)[0]))
+
+
 def _mad(v):
     """The scaled MAD of all the samples of ``v`` (the standard deviation of normal noise)."""
     return 1.4826 * median(np.abs(v - median(v)))
@@ -756,11 +766,11 @@ class SilhouetteTracer:
         self._nb = nb  # (the neighbours' nearest walls' columns, view, first frame)
         self._lim = None  # (per row, the columns the dome is searched for between, once a gap was measured)
         self._lim_next = None  # (this frame's measured ones, for the next frame)
-        if self.bounds is not None:  # (the flat frame's specks beside those columns, :meth:`_neighbour_gap`)
-            top = max(int(w.top_row), 1)
-            v = np.rot90(maps.values, self.k)[:top]
-            self._speck_map = _speck_map(np.rot90(maps.deviation, self.k)[:top],
-                                         v == maps.values.max())
+        # (the flat frame's specks above the top face: not a neighbour's dome, :meth:`_neighbour_gap`,
+        # :meth:`_side_gap`)
+        top = max(int(w.top_row), 1)
+        v = np.rot90(maps.values, self.k)[:top]
+        self._speck_map = _speck_map(np.rot90(maps.deviation, self.k)[:top], v == maps.values.max())
         self._rim0 = (w.axis_col - w.left, w.right - w.axis_col)  # the film's material rim radii (:func:`_thickness`)
         self.polarity = 0  # the dome's sign (+1 darker than the water), from the first frame showing it
         self.shape = frame.shape
@@ -962,6 +972,9 @@ class SilhouetteTracer:
         self._edge_reached = (index, figs.get("field_margin", np.inf))
         out.figures["rim_contact"] = self._rim_contact(sample, w, u, z, noise)
         if self.bounds is None:
+            gap = self._side_gap(sample, w, u, z, dx, dy, noise)
+            if np.isfinite(gap):
+                out.figures["neighbour_gap"] = gap
             return self._finish(u, z, w, g, out)
         self._lim_next = None
         out.figures["neighbour_gap"] = self._neighbour_gap(sample, w, u, z, dx, dy, noise)
@@ -1053,6 +1066,54 @@ class SilhouetteTracer:
         if lim is not None:
             self._lim_next = tuple(lim)
         return max(gap, 0.0)
+
+    def _side_gap(self, sample, w, u, z, dx, dy, noise):
+        """With no neighbouring well seen (:attr:`bounds` None): how near (px) the dome comes to a dome coming in
+        at the field's side edges (a neighbour's, its well beyond the field), inf when there is none.
+
+        A change of either sign over 10x the noise, not on a speck of the flat frame, on a side edge's column
+        above the top face, more than ``_NEAR_PX`` from the dome's outer face (points ``(u, z)``), is a dome
+        coming in there.  The change over 10x the noise on a grid of ``_SIDE_STEP`` px over the water above the
+        top face falls into connected pieces; the gap is 0 when the piece at that edge is the one at the dome's
+        outer face (the two changes merge: the domes touch, or their halos do), else the least distance from
+        that piece to the outer face.  Measured (2026-12-06) on wells 3.1 radii apart (halo look, their walls
+        beyond the field): the domes overlapping by 2 px read ok, not touching, 0.68 of the tolerance off.
+        """
+        top = np.floor(w.top_row - 2.0 * _FOOT_PX)
+        if top < 2.0 * _SIDE_STEP:
+            return np.inf
+        rows = np.arange(0.0, top + 1.0, _SIDE_STEP)
+        n_cols = self.view_shape[1]
+        face = np.column_stack((w.axis_col + u, w.top_row - z))
+        edges = np.array([1.0, n_cols - 2.0])
+        v = sample(np.column_stack((edges, np.zeros(2))), np.tile([0.0, 1.0], (2, 1)), rows, own=False)
+        loud = (np.abs(v) > 10.0 * noise) & self._clear_of_specks(rows[None, :], edges[:, None], dx, dy)
+        sides = [j for j, col in enumerate(edges) if loud[j].any()
+                 and _least_distance(face, np.column_stack((np.full(int(loud[j].sum()), col), rows[loud[j]])))
+                 > _NEAR_PX]
+        if not sides:
+            return np.inf
+        cols = np.arange(0.0, n_cols - 1.0, _SIDE_STEP)
+        v = sample(np.column_stack((np.zeros(rows.size), rows)), np.tile([1.0, 0.0], (rows.size, 1)), cols,
+                   own=False)
+        on = (np.abs(v) > 10.0 * noise) & self._clear_of_specks(rows[:, None], cols[None, :], dx, dy)
+        lab, _ = ndimage.label(on, structure=np.ones((3, 3), bool))
+        # the dome's pieces: those within a grid step of its outer face's points
+        ri = np.clip(np.rint(face[:, 1] / _SIDE_STEP).astype(np.intp), 0, rows.size - 1)
+        ci = np.clip(np.rint(face[:, 0] / _SIDE_STEP).astype(np.intp), 0, cols.size - 1)
+        at_face = np.zeros(on.shape, bool)
+        at_face[ri, ci] = True
+        dome = np.unique(lab[ndimage.binary_dilation(at_face, np.ones((3, 3), bool))])
+        gap = np.inf
+        for j in sides:
+            pieces = np.unique(lab[:, -1 if j else 0])
+            pieces = pieces[pieces > 0]
+            if np.intersect1d(pieces, dome[dome > 0]).size:
+                return 0.0
+            rr, cc = np.nonzero(np.isin(lab, pieces))
+            if rr.size:
+                gap = min(gap, _least_distance(face, np.column_stack((cols[cc], rows[rr]))))
+        return gap
 
     def _face_on(self, sample, side, b, rows, dx, dy, noise):
         """Whether a dome's face (a change of either sign over 10x the noise) lies on the half-way column ``b``

@@ -1030,6 +1030,42 @@ def test_neighbours_whose_wells_lie_beyond_the_field_are_not_taken_for_the_dome(
     assert np.all(np.abs(sc["dv_tol"]) < 0.1) and sc["n_silent"] == 0
 
 
+@pytest.mark.parametrize(("name", "drift"), [("edge_dark", -15e-6), ("edge_bright", 24e-6)])
+def test_the_focal_plane_drifting_and_the_liquid_diluting_leave_the_volumes(name, drift):
+    """A day without autofocus: the focal plane drifts 15 um off (edge_dark), or through focus from -12 to
+    +12 um (edge_bright: the fringes swap sides), while the salt solution is diluted by the water that came in
+    (Optics.dilution).  The tracer reads the change from the first frame, whose faces' fringes were at another
+    focus: measured on the 12 optics presets over Vtilde 0-4 (9 frames), a drift of +-12 to 15 um and +30 um
+    left every frame ok within 0.26 of the tolerance; -30 um flagged 21 of 108 frames and read one 1.04x off."""
+    look = LOOKS[name]
+    s = render_look(name, VT, shape=SHAPE, lambda_pre=PRE, optics=replace(look.optics, dilution=True),
+                    nuisances=replace(look.nuisances, focus_drift=drift))
+    ds = _extract(s)
+    sc = score(s.truth, ds)
+    assert list(ds.flag.values) == ["ok"] * len(VT), ds.message.values
+    assert np.all(sc["dv_tol"] < 0.3) and np.all(np.abs(sc["rim_bias_px"]) < 0.5), sc["dv_tol"]
+
+
+def test_a_neighbour_coming_in_at_the_fields_side_is_measured_and_touching_is_flagged():
+    """Wells 3.1 radii apart (halo look): the neighbours' walls lie beyond the field, so no bounds are known and
+    there was no gap measured and no touching flag: the last frame, the domes overlapping by 2 px, read ok
+    (0.55 of the tolerance off).  Their domes come in at the field's sides: the gap to the change that comes in
+    there is measured on a 2 px grid (_side_gap), and is 0 when that change is one piece with the dome's face."""
+    a = 200e-6
+    nu = replace(LOOKS["halo"].nuisances, neighbours=((-3.1 * a, 0.9), (3.1 * a, 0.9)))
+    s = render_look("halo", [0.0, 3.0, 3.4, 3.7, 4.0], shape=SHAPE, nuisances=nu)
+    p = s.truth.attrs["pixel_size"]
+    truth = s.truth.neighbour_gap.values / p
+    assert list(s.truth.flag.values) == ["ok"] * 4 + ["touching"] and truth[3] > 15.0  # (the truth: 2 px overlap)
+    assert SilhouetteTracer(s.frames[0], **_known(s)).bounds is None
+    ds = _extract(s)
+    assert list(ds.flag.values) == ["ok"] * 4 + ["touching"], ds.message.values
+    gap = ds.neighbour_gap.values / p
+    # (measured to the neighbour's change, its halo 3.75 px wide included: 1.9-3.2 px short of the bands' gap)
+    assert np.all(np.abs(gap[1:4] - truth[1:4] + 2.5) < 1.5), (gap, truth)
+    assert gap[4] == 0.0 and score(s.truth, ds)["n_silent"] == 0
+
+
 @pytest.mark.parametrize("corner", ["tl", "tr"])
 def test_a_time_stamp_burned_into_the_frames_is_not_taken_for_the_dome(edge_dark, corner):
     """A time stamp in a top corner of the frames (a microscope's export with annotations): its digits change
