@@ -766,11 +766,13 @@ class SilhouetteTracer:
         self._nb = nb  # (the neighbours' nearest walls' columns, view, first frame)
         self._lim = None  # (per row, the columns the dome is searched for between, once a gap was measured)
         self._lim_next = None  # (this frame's measured ones, for the next frame)
+        self._side_seen = None  # (the first frame a dome came in at the field's side in, :meth:`_side_gap`)
         # (the flat frame's specks above the top face: not a neighbour's dome, :meth:`_neighbour_gap`,
-        # :meth:`_side_gap`)
+        # :meth:`_side_gap`; mapped when first asked for, :meth:`_clear_of_specks`)
         top = max(int(w.top_row), 1)
-        v = np.rot90(maps.values, self.k)[:top]
-        self._speck_map = _speck_map(np.rot90(maps.deviation, self.k)[:top], v == maps.values.max())
+        self._speck_map = None
+        self._speck_src = (np.rot90(maps.deviation, self.k)[:top],
+                           np.rot90(maps.values, self.k)[:top] == maps.values.max())
         self._rim0 = (w.axis_col - w.left, w.right - w.axis_col)  # the film's material rim radii (:func:`_thickness`)
         self.polarity = 0  # the dome's sign (+1 darker than the water), from the first frame showing it
         self.shape = frame.shape
@@ -975,6 +977,7 @@ class SilhouetteTracer:
             gap = self._side_gap(sample, w, u, z, dx, dy, noise)
             if np.isfinite(gap):
                 out.figures["neighbour_gap"] = gap
+                self._side_seen = index if self._side_seen is None else self._side_seen
             return self._finish(u, z, w, g, out)
         self._lim_next = None
         out.figures["neighbour_gap"] = self._neighbour_gap(sample, w, u, z, dx, dy, noise)
@@ -1087,7 +1090,10 @@ class SilhouetteTracer:
         face = np.column_stack((w.axis_col + u, w.top_row - z))
         edges = np.array([1.0, n_cols - 2.0])
         v = sample(np.column_stack((edges, np.zeros(2))), np.tile([0.0, 1.0], (2, 1)), rows, own=False)
-        loud = (np.abs(v) > 10.0 * noise) & self._clear_of_specks(rows[None, :], edges[:, None], dx, dy)
+        loud = np.abs(v) > 10.0 * noise
+        if not loud.any():
+            return np.inf
+        loud &= self._clear_of_specks(rows[None, :], edges[:, None], dx, dy)
         sides = [j for j, col in enumerate(edges) if loud[j].any()
                  and _least_distance(face, np.column_stack((np.full(int(loud[j].sum()), col), rows[loud[j]])))
                  > _NEAR_PX]
@@ -1128,6 +1134,8 @@ class SilhouetteTracer:
     def _clear_of_specks(self, rows, cols, dx, dy):
         """Whether view points (this frame) lie farther from the flat frame's specks (dust fixed to the camera:
         the change shows them where they are and moved by the drift) than the drift and ``_SPECK_PX``."""
+        if self._speck_map is None:
+            self._speck_map, self._speck_src = _speck_map(*self._speck_src), None
         m = self._speck_map
         rr = np.clip(np.rint(rows - dy), 0, m.shape[0] - 1).astype(np.intp)
         cc = np.clip(np.rint(cols - dx), 0, m.shape[1] - 1).astype(np.intp)
@@ -1453,6 +1461,9 @@ class SilhouetteTracer:
         out.flag, out.flag_figure, out.flag_value = self._flag(out.figures)
         if out.flag_figure == "field_margin":
             out.message = field_edge_message(out.flag_value)
+            if self._side_seen is not None:  # (a neighbour's dome met: the trace runs on along it)
+                out.message += (f"; a dome has come in at the field's side since frame {self._side_seen}: the "
+                                "domes may touch")
         elif out.flag_figure == "least_bend":
             out.message = (f"a straight stretch in the dome's outline (its least bend over a tenth of it "
                            f"{out.flag_value:.2f} of its mean, under {_BEND_FLAG:g}): a membrane under pressure "

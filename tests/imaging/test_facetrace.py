@@ -1030,13 +1030,32 @@ def test_neighbours_whose_wells_lie_beyond_the_field_are_not_taken_for_the_dome(
     assert np.all(np.abs(sc["dv_tol"]) < 0.1) and sc["n_silent"] == 0
 
 
+def test_a_series_exported_as_jpeg_files_is_read(edge_dark, tmp_path):
+    """A folder of 8-bit JPEG frames at quality 40 (a video or an export at its smallest): 8x8 blocks and ringing
+    beside every face and wall in the change.  Measured on the 14 presets (9 frames, Vtilde 0-4): at quality 75
+    none flagged, worst 0.24 of the tolerance; at 40 one frame flagged (halo, Vtilde 0.02, delaminated), worst
+    0.26, none silent."""
+    from PIL import Image
+
+    frames = np.asarray(edge_dark.frames, float)
+    for i, f in enumerate(frames):
+        Image.fromarray(np.rint(f / frames.max() * 255.0).astype(np.uint8)).save(tmp_path / f"t{i:03d}.jpg",
+                                                                                 quality=40)
+    ds = extract(tmp_path, pixel_size=edge_dark.truth.attrs["pixel_size"], chamber=_chamber(edge_dark.truth),
+                 progress=False, frame_interval=600.0)
+    sc = score(edge_dark.truth, ds)
+    assert list(ds.flag.values) == ["ok"] * len(VT), ds.message.values
+    assert np.all(sc["dv_tol"] < 0.3) and np.all(np.abs(sc["rim_bias_px"]) < 0.5), sc["dv_tol"]
+
+
 @pytest.mark.parametrize(("name", "drift"), [("edge_dark", -15e-6), ("edge_bright", 24e-6)])
 def test_the_focal_plane_drifting_and_the_liquid_diluting_leave_the_volumes(name, drift):
     """A day without autofocus: the focal plane drifts 15 um off (edge_dark), or through focus from -12 to
     +12 um (edge_bright: the fringes swap sides), while the salt solution is diluted by the water that came in
     (Optics.dilution).  The tracer reads the change from the first frame, whose faces' fringes were at another
-    focus: measured on the 12 optics presets over Vtilde 0-4 (9 frames), a drift of +-12 to 15 um and +30 um
-    left every frame ok within 0.26 of the tolerance; -30 um flagged 21 of 108 frames and read one 1.04x off."""
+    focus: measured on the 12 optics presets over Vtilde 0-4 (9 frames), a drift of +12 um, and of -15 um and
+    +30 um with the dilution, left every frame ok within 0.26 of the tolerance; -30 um flagged 21 of 108 frames
+    and read one 1.04x off, ok (coarse_2um's last)."""
     look = LOOKS[name]
     s = render_look(name, VT, shape=SHAPE, lambda_pre=PRE, optics=replace(look.optics, dilution=True),
                     nuisances=replace(look.nuisances, focus_drift=drift))
@@ -1064,6 +1083,12 @@ def test_a_neighbour_coming_in_at_the_fields_side_is_measured_and_touching_is_fl
     # (measured to the neighbour's change, its halo 3.75 px wide included: 1.9-3.2 px short of the bands' gap)
     assert np.all(np.abs(gap[1:4] - truth[1:4] + 2.5) < 1.5), (gap, truth)
     assert gap[4] == 0.0 and score(s.truth, ds)["n_silent"] == 0
+    # the frame after (a full search: after a flagged frame) is traced on along the neighbour's dome to the
+    # field's edge; its message says a dome came in at the side
+    t = SilhouetteTracer(s.frames[0], **_known(s))
+    outs = [t.process(f, i) for i, f in enumerate(s.frames)] + [t.process(s.frames[-1], 5)]
+    assert [o.flag for o in outs[-2:]] == ["touching", "poor_fit"], outs[-1].message
+    assert "a dome has come in at the field's side since frame 1" in outs[-1].message
 
 
 @pytest.mark.parametrize("corner", ["tl", "tr"])
