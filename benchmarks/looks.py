@@ -28,7 +28,8 @@ burns a time stamp into that corner of every frame (and a scale bar into a
 bottom one), as a microscope's export with annotations does.  ``--focus-drift UM``
 moves the focal plane by that much from the first frame to the last (the painted
 looks have none: unchanged), and ``--dilution`` dilutes the salt solution by the
-water that came in (``Optics.dilution``).
+water that came in (``Optics.dilution``).  ``--jpeg Q`` reads every frame as an
+8-bit JPEG at quality Q (a video or a small export).
 """
 
 from __future__ import annotations
@@ -48,7 +49,23 @@ PRE = PreStretch(0.01, 0.0)
 
 
 def _look(name):
+    """The named look, wherever it is kept."""
     return LOOKS.get(name) or HELD_OUT_LOOKS.get(name) or OUTSIDE_LOOKS[name]
+
+
+def _as_jpeg(frames, quality):
+    """The frames as 8-bit JPEG files at ``quality`` would give them back (scaled to their greatest value)."""
+    import io
+
+    from PIL import Image
+
+    top = float(np.max(frames))
+    out = []
+    for f in np.asarray(frames, float):
+        buf = io.BytesIO()
+        Image.fromarray(np.rint(f / top * 255.0).astype(np.uint8)).save(buf, "JPEG", quality=quality)
+        out.append(np.asarray(Image.open(io.BytesIO(buf.getvalue()))))
+    return np.stack(out)
 
 
 def _nuisances(name, n, events=None, stamp="none", focus_drift=0.0):
@@ -62,7 +79,7 @@ def _nuisances(name, n, events=None, stamp="none", focus_drift=0.0):
     return replace(look.nuisances, time_stamp=stamp, focus_drift=focus, **torn)
 
 
-def row(name, vt, events=None, stamp="none", focus_drift=0.0, dilution=False):
+def row(name, vt, events=None, stamp="none", focus_drift=0.0, dilution=False, jpeg=None):
     t0 = time.perf_counter()
     optics = _look(name).optics
     if optics is not None and dilution:
@@ -71,9 +88,10 @@ def row(name, vt, events=None, stamp="none", focus_drift=0.0, dilution=False):
                     optics=optics)
     t_render = time.perf_counter() - t0
     a, h, l0 = (s.truth.attrs[k] for k in ("chamber_radius", "chamber_depth", "membrane_thickness"))
+    frames = s.frames if jpeg is None else _as_jpeg(s.frames, jpeg)
     t0 = time.perf_counter()
     try:
-        ds = extract(s.frames, pixel_size=s.truth.attrs["pixel_size"], chamber=Chamber(a, h, l0, 3000.0),
+        ds = extract(frames, pixel_size=s.truth.attrs["pixel_size"], chamber=Chamber(a, h, l0, 3000.0),
                      progress=False, frame_interval=600.0)
     except Exception as exc:  # noqa: BLE001 - the benchmark reports every failure as a row
         return f"| {name:20s} | {type(exc).__name__}: {str(exc)[:90]} |"
@@ -100,6 +118,7 @@ def main():
                     help="the focal plane's travel (um) from the first frame to the last (optics looks)")
     ap.add_argument("--dilution", action="store_true",
                     help="the salt solution diluted by the water that came in (optics looks)")
+    ap.add_argument("--jpeg", type=int, metavar="Q", help="read the frames as 8-bit JPEGs at quality Q (1-95)")
     args = ap.parse_args()
     vt = np.linspace(0.0, 4.0, args.frames) ** 1.5 / 2.0
     head = ("| look                 | route | worst dV/tol (ok) | V ok | rim bias px (median) | worst rim px |"
@@ -114,10 +133,12 @@ def main():
         events += "" if args.stamp == "none" else f" (time stamp: {args.stamp})"
         events += "" if args.focus_drift == 0.0 else f" (focus drift: {args.focus_drift:+g} um)"
         events += " (liquid diluted)" if args.dilution else ""
+        events += "" if args.jpeg is None else f" (JPEG, quality {args.jpeg})"
         print(f"\n## {title}{events}: Vtilde {', '.join(f'{x:.2f}' for x in vt)}\n")
         print(head)
         for name in looks:
-            print(row(name, vt, args.events, args.stamp, args.focus_drift * 1e-6, args.dilution), flush=True)
+            print(row(name, vt, args.events, args.stamp, args.focus_drift * 1e-6, args.dilution, args.jpeg),
+                  flush=True)
 
 
 if __name__ == "__main__":

@@ -973,14 +973,17 @@ class SilhouetteTracer:
             return out
         self._edge_reached = (index, figs.get("field_margin", np.inf))
         out.figures["rim_contact"] = self._rim_contact(sample, w, u, z, noise)
+        # (the sides with no neighbouring well seen: a neighbour's dome may come in at the field's edge there)
+        open_sides = [j for j in (0, 1) if self.bounds is None or not np.isfinite(self.bounds[j])]
+        side = self._side_gap(sample, w, u, z, dx, dy, noise, open_sides) if open_sides else np.inf
+        if np.isfinite(side) and self._side_seen is None:
+            self._side_seen = index
         if self.bounds is None:
-            gap = self._side_gap(sample, w, u, z, dx, dy, noise)
-            if np.isfinite(gap):
-                out.figures["neighbour_gap"] = gap
-                self._side_seen = index if self._side_seen is None else self._side_seen
+            if np.isfinite(side):
+                out.figures["neighbour_gap"] = side
             return self._finish(u, z, w, g, out)
         self._lim_next = None
-        out.figures["neighbour_gap"] = self._neighbour_gap(sample, w, u, z, dx, dy, noise)
+        out.figures["neighbour_gap"] = min(self._neighbour_gap(sample, w, u, z, dx, dy, noise), side)
         out = self._finish(u, z, w, g, out)
         if self._lim_next is not None and out.flag in ("ok", "touching"):  # (the next frame's search limits)
             self._lim = self._lim_next
@@ -1070,17 +1073,19 @@ class SilhouetteTracer:
             self._lim_next = tuple(lim)
         return max(gap, 0.0)
 
-    def _side_gap(self, sample, w, u, z, dx, dy, noise):
-        """With no neighbouring well seen (:attr:`bounds` None): how near (px) the dome comes to a dome coming in
-        at the field's side edges (a neighbour's, its well beyond the field), inf when there is none.
+    def _side_gap(self, sample, w, u, z, dx, dy, noise, sides=(0, 1)):
+        """How near (px) the dome comes to a dome coming in at the field's side edges ``sides`` (0 left, 1 right:
+        those with no neighbouring well seen, :attr:`bounds`), a neighbour's whose well lies beyond the field;
+        inf when there is none.
 
-        A change of either sign over 10x the noise, not on a speck of the flat frame, on a side edge's column
+        A change of either sign over 10x the noise, not on a speck of the flat frame, on such an edge's column
         above the top face, more than ``_NEAR_PX`` from the dome's outer face (points ``(u, z)``), is a dome
         coming in there.  The change over 10x the noise on a grid of ``_SIDE_STEP`` px over the water above the
         top face falls into connected pieces; the gap is 0 when the piece at that edge is the one at the dome's
         outer face (the two changes merge: the domes touch, or their halos do), else the least distance from
         that piece to the outer face.  Measured (2026-12-06) on wells 3.1 radii apart (halo look, their walls
-        beyond the field): the domes overlapping by 2 px read ok, not touching, 0.68 of the tolerance off.
+        beyond the field): the domes overlapping by 2 px read ok, not touching, 0.68 of the tolerance off; now
+        touching, and the gaps before it 1.9-3.2 px short of the bands' (the neighbour's halo).
         """
         top = np.floor(w.top_row - 2.0 * _FOOT_PX)
         if top < 2.0 * _SIDE_STEP:
@@ -1088,15 +1093,15 @@ class SilhouetteTracer:
         rows = np.arange(0.0, top + 1.0, _SIDE_STEP)
         n_cols = self.view_shape[1]
         face = np.column_stack((w.axis_col + u, w.top_row - z))
-        edges = np.array([1.0, n_cols - 2.0])
-        v = sample(np.column_stack((edges, np.zeros(2))), np.tile([0.0, 1.0], (2, 1)), rows, own=False)
+        edges = np.array([1.0 if j == 0 else n_cols - 2.0 for j in sides])
+        v = sample(np.column_stack((edges, np.zeros(edges.size))), np.tile([0.0, 1.0], (edges.size, 1)), rows,
+                   own=False)
         loud = np.abs(v) > 10.0 * noise
         if not loud.any():
             return np.inf
         loud &= self._clear_of_specks(rows[None, :], edges[:, None], dx, dy)
-        sides = [j for j, col in enumerate(edges) if loud[j].any()
-                 and _least_distance(face, np.column_stack((np.full(int(loud[j].sum()), col), rows[loud[j]])))
-                 > _NEAR_PX]
+        sides = [j for j, col, on in zip(sides, edges, loud, strict=True) if on.any()
+                 and _least_distance(face, np.column_stack((np.full(int(on.sum()), col), rows[on]))) > _NEAR_PX]
         if not sides:
             return np.inf
         cols = np.arange(0.0, n_cols - 1.0, _SIDE_STEP)

@@ -16,6 +16,7 @@ from osmobulge.imaging._chamber import ChamberNotFound
 from osmobulge.imaging._facetrace import SilhouetteTracer, _profiles, dark_background
 from osmobulge.imaging.extract import extract
 from osmobulge.imaging.looks import LOOKS, render_look, score
+from osmobulge.imaging.synthetic import SceneGeometry
 from osmobulge.imaging.trace import TraceSettings
 from osmobulge.modeling import PreStretch
 from osmobulge.modeling.transport import Chamber
@@ -1089,6 +1090,27 @@ def test_a_neighbour_coming_in_at_the_fields_side_is_measured_and_touching_is_fl
     outs = [t.process(f, i) for i, f in enumerate(s.frames)] + [t.process(s.frames[-1], 5)]
     assert [o.flag for o in outs[-2:]] == ["touching", "poor_fit"], outs[-1].message
     assert "a dome has come in at the field's side since frame 1" in outs[-1].message
+
+
+def test_a_neighbour_coming_in_at_the_side_with_no_well_seen_is_measured_beside_a_known_one():
+    """A neighbour's well seen on the left (flat: a well, no dome), another's beyond the field on the right
+    (halo look, the axis 660 px from the left edge of a 1130 px field): the right side had no bound and was
+    not watched; the gap read was the left one's search (45 px where the domes were 39 px apart).  The side
+    with no well seen is watched as with none (_side_gap): the gap is the right neighbour's, 3.6 px short of
+    the bands' (its halo).  The frames after, the domes within 18 px, then touching, are flagged (the trace
+    takes part of the neighbour's face: touching and fractured)."""
+    a = 200e-6
+    nu = replace(LOOKS["halo"].nuisances, neighbours=((-3.36 * a, 0.0), (3.1 * a, 0.9)))
+    s = render_look("halo", [0.0, 3.0, 3.4, 3.7, 4.0], shape=(860, 1130), nuisances=nu,
+                    scene=SceneGeometry(axis_position=(660.0, 630.0)))
+    p = s.truth.attrs["pixel_size"]
+    bounds = SilhouetteTracer(s.frames[0], **_known(s)).bounds
+    assert np.isfinite(bounds[0]) and bounds[1] == np.inf
+    ds = _extract(s)
+    truth = s.truth.neighbour_gap.values / p
+    assert list(ds.flag.values[:3]) == ["ok"] * 3 and "ok" not in ds.flag.values[3:], ds.flag.values
+    assert -5.0 < ds.neighbour_gap.values[2] / p - truth[2] < 0.0, (ds.neighbour_gap.values / p, truth)
+    assert score(s.truth, ds)["n_silent"] == 0
 
 
 @pytest.mark.parametrize("corner", ["tl", "tr"])
