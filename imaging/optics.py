@@ -97,7 +97,8 @@ class Optics:
         Read by :func:`osmobulge.imaging.synthetic.render_series`: the salt
         solution is diluted by the water that came in, so ``n_liquid`` and
         ``absorption_liquid`` are the first frame's and a frame whose volume
-        is ``V/V0 = 1 + Vtilde a/h`` times the well's has ``n_water + (n_liquid
+        is ``V/V0 = 1 + Vtilde a/h`` times the well's (``Vtilde = dV/(pi a^3)``,
+        main text Eqn 4; ``V0 = pi a^2 h``) has ``n_water + (n_liquid
         - n_water) V0/V`` and ``absorption_liquid V0/V`` (index and dye linear
         in the concentration; the neighbours take the reference chamber's).
     """

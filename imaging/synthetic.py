@@ -1088,7 +1088,9 @@ def _frame_optics(optics, nuis: Nuisances, vtilde, times, i, a, h):
     if nuis.focus_drift != 0.0 and times[-1] != times[0]:
         change["defocus"] = optics.defocus + nuis.focus_drift * (times[i] - times[0]) / (times[-1] - times[0])
     if optics.dilution:
-        share = 1.0 / (1.0 + vtilde * a / h)  # (V0/V: the salt's concentration over the first frame's)
+        # (V0/V, the salt's concentration over the first frame's: V = pi a^2 h + pi a^3 Vtilde, main text Eqn 4;
+        # a, h in m)
+        share = 1.0 / (1.0 + vtilde * a / h)
         change["n_liquid"] = optics.n_water + (optics.n_liquid - optics.n_water) * share
         change["absorption_liquid"] = optics.absorption_liquid * share
     return replace(optics, **change) if change else optics
