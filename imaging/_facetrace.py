@@ -149,6 +149,21 @@ _FOOT_PX, _LOW_DOME_PX = 4.0, 8.0
 #: thickness (px, or this fraction of it) before every frame is flagged poor_fit (figure flat_film): the top
 #: face (the mid plane every height is measured from) is then in doubt
 _FILM_TOL_PX, _FILM_TOL = 1.0, 0.05
+#: the first frame's film over the well must lie on the top face beside the well: its lift (:func:`_flat_lift`, the
+#: mean over the rim disc of how far the face's profile in bins of _LIFT_BIN_PX columns lies above the profile beside
+#: the well) beyond _FLAT_LIFT_PX px flags every frame poor_fit (figure flat_lift), as its reference is not flat.  A
+#: low dome's silhouette fades into the face (a ray just above the top face crosses the dome's elastomer over a chord
+#: that shrinks to nothing at its pole), so this reads less than the dome's true layer, the less the lower the dome
+#: (measured 2026-12-06, the 12 optics presets' first frame alone: Vtilde 0.002, a 0.5 px layer, one tolerance,
+#: 0.15-0.40 px on 9 looks, 0.08 on the 10 and 26 um films, 0.004 at 2 um/px (there a 0.2 px layer); Vtilde 0.003,
+#: 0.19-0.25 on the films and the turbid base; Vtilde 0.005, 0.45-1.05, 0.08 at 2 um/px, 0.16 at 0.007), and the
+#: flat first frames of 158 cached renders (presets, held-out looks, probes) read -0.06..+0.034 px.  Before: a first
+#: frame at Vtilde 0.003-0.005 read flat and ok, 1.5-2.5x the tolerance, and on the halo look at 0.005 frames 1-2
+#: too, 1.7x and 1.3x (the dome's sign learned from the old dome's ghost); from 0.01 the flat film's faces
+#: (flat_film) or the dome's search (:meth:`SilhouetteTracer._check_flat`) flagged or refused the series, except
+#: absorbing_band, frame 0 ok 5x off.  Now every frame of those series is flagged (Vtilde 0.003 and 0.005, 9 frames,
+#: the 12 presets), save 2 um/px, whose frame 0 is then within its tolerance (0.6 and 1.0 of it)
+_LIFT_BIN_PX, _FLAT_LIFT_PX = 8, 0.15
 #: columns beside the walls kept when a later frame's walls are found (their zone is inside the well, the light
 #: just outside them 4-12 px out; find_walls looks for them within 20 px of the expected columns)
 _WALL_MARGIN = 40
@@ -431,6 +446,59 @@ def _film_thickness(d, top_row, left, right, guess):
     if prof[k] < 0.1 or k in (0, prof.size - 1):
         return np.nan
     return float(r0 + k + _vertex(prof[k - 1], prof[k], prof[k + 1]) - top_row)
+
+
+def _flat_lift(dev, w, l0, bounds=None, up=12, reach=12):
+    """The first frame's film over the well: its mean lift above the top face beside the well (px over the rim
+    disc, as a layer: the solid of revolution of each side's lifts, the two sides' mean), or nan.
+
+    ``dev``: the view's signed deviation from the light (:class:`FlatMaps`).
+    The top face's profile (``up`` rows above it to half the film below), the
+    mean of each side's median over the columns beside the well (10 px beyond
+    the rims, within ``bounds``, the columns half-way to the neighbouring
+    wells), is found in each
+    bin of ``_LIFT_BIN_PX`` columns over the well (5 px inside the rims) by its
+    normalised cross-correlation, within ``reach`` rows up or down (a
+    parabola's vertex between rows), and the bins' lifts pass a running median
+    of 5 (a speck on the face).  A tilt of the view lifts one side and lowers
+    the other: the mean of the two sides' solids leaves it out.
+    """
+    top, rim, axis = w.top_row, w.rim_radius, w.axis_col
+    r0, r1 = int(np.floor(top)) - up, int(np.ceil(top + 0.5 * l0))
+    if r0 - reach < 0 or r1 + reach > dev.shape[0]:
+        return np.nan
+    u = np.arange(dev.shape[1]) - axis
+    lo, hi = (-np.inf, np.inf) if bounds is None else (bounds[0] - axis, bounds[1] - axis)
+    sides = [(u < -rim - 10.0) & (u > lo), (u > rim + 10.0) & (u < hi)]
+    sides = [c for c in sides if c.sum() >= 5]
+    n_bins = int(2.0 * (rim - 5.0) // _LIFT_BIN_PX)
+    if sum(c.sum() for c in sides) < 10 or n_bins < 6:
+        return np.nan
+    band = dev[r0 - reach : r1 + reach]
+    face = band[reach : reach + r1 - r0]
+    tmpl = np.mean([np.median(face[:, c], axis=1) for c in sides], axis=0)  # (each side's: a tilt cancels)
+    tmpl = tmpl - tmpl.mean()
+    c0 = int(round(axis - 0.5 * n_bins * _LIFT_BIN_PX))
+    if c0 < 0 or c0 + n_bins * _LIFT_BIN_PX > dev.shape[1]:
+        return np.nan
+    bins = np.median(band[:, c0 : c0 + n_bins * _LIFT_BIN_PX].reshape(band.shape[0], n_bins, _LIFT_BIN_PX), axis=2)
+    seg = np.lib.stride_tricks.sliding_window_view(bins.T, r1 - r0, axis=1)  # (bin, start row, row)
+    seg = seg - seg.mean(axis=2, keepdims=True)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        cc = (seg @ tmpl) / np.sqrt(np.einsum("ijk,ijk->ij", seg, seg) * (tmpl @ tmpl))
+    cc = np.nan_to_num(cc, nan=-1.0)
+    j = np.argmax(cc, axis=1)
+    inner = np.clip(j, 1, cc.shape[1] - 2)
+    i = np.arange(n_bins)
+    off = np.where((j > 0) & (j < cc.shape[1] - 1), _vertex(cc[i, inner - 1], cc[i, inner], cc[i, inner + 1]), 0.0)
+    lift = ndimage.median_filter(reach - (j + off), 5, mode="nearest")  # (a window starting reach - L rows up)
+    r = np.abs(c0 + (i + 0.5) * _LIFT_BIN_PX - axis)
+    half = n_bins // 2
+    solids = []
+    for rs, zs in ((r[:half][::-1], lift[:half][::-1]), (r[n_bins - half :], lift[n_bins - half :])):  # axis -> rim
+        rs, zs = np.r_[0.0, rs, rim], np.r_[zs[0], zs, 0.0]
+        solids.append(2.0 * np.pi * np.trapezoid(zs * rs, rs))
+    return float(np.mean(solids) / (np.pi * rim**2))
 
 
 def _first_edges(v, t, sign, noise, size=9):
@@ -764,6 +832,8 @@ class SilhouetteTracer:
             0.5 * (nb[0] + w.left) if np.isfinite(nb[0]) else -np.inf,
             0.5 * (nb[1] + w.right) if np.isfinite(nb[1]) else np.inf)
         self._nb = nb  # (the neighbours' nearest walls' columns, view, first frame)
+        # the film over the well must lie on the top face: every frame's change is measured from this frame
+        self.flat_lift = _flat_lift(np.rot90(maps.deviation, self.k), w, self.l0, self.bounds)
         self._lim = None  # (per row, the columns the dome is searched for between, once a gap was measured)
         self._lim_next = None  # (this frame's measured ones, for the next frame)
         self._side_seen = None  # (the first frame a dome came in at the field's side in, :meth:`_side_gap`)
@@ -910,6 +980,22 @@ class SilhouetteTracer:
 
     def process(self, frame, index=0, *, guide=None, manual=None):
         """Measure one frame (``guide`` is not needed by this route and ignored); returns a FrameTrace."""
+        out = self._measure(frame, index, manual)
+        if out.message:
+            return out
+        if out.flag_figure == "flat_lift":
+            out.message = (f"the first frame is not flat: its film over the well stands {self.flat_lift:+.2f} px above "
+                           f"the top face beside the well (a layer over the rim disc; a low dome's silhouette reads "
+                           f"0.2-0.8 of its own), and every frame's change is measured from it as the flat membrane: "
+                           f"give a frame of the flat membrane (reference_frame=), pick the profiles by hand, or keep "
+                           f"the frames you judge right (curation: keep flagged)")
+        elif out.flag_figure == "flat_film":
+            out.message = (f"the flat film's two faces in the first frame are {self.film_mismatch:.1f} px off the "
+                           f"membrane's thickness ({self.l0:.1f} px): the top face every height is measured from is in "
+                           f"doubt (is the chamber's thickness right? is the first frame flat?)")
+        return out
+
+    def _measure(self, frame, index, manual):
         frame = np.asarray(frame)
         if frame.shape != self.shape:
             raise ValueError(f"frame {index} has shape {frame.shape}, expected {self.shape}")
@@ -1491,9 +1577,12 @@ class SilhouetteTracer:
     def _flag(self, fig):
         st = self.settings
         fig.setdefault("flat_film", self.film_mismatch)
+        fig.setdefault("flat_lift", self.flat_lift)
         checks = [
             # (first: a stretch of the dome outside the frame is no tear, and a neighbour is not seen there)
             ("poor_fit", "field_margin", fig.get("field_margin", np.inf) < FIELD_MARGIN_PX),
+            # (then a first frame that is not flat: every change, and each event seen in it, is measured from it)
+            ("poor_fit", "flat_lift", abs(self.flat_lift) > _FLAT_LIFT_PX),
             ("touching", "neighbour_gap", fig.get("neighbour_gap", np.inf) < st.touching_flag),
             ("delaminated", "rim_contact", fig.get("rim_contact", np.nan) < st.delamination_flag),
             ("fractured", "gap_length", fig.get("gap_length", 0.0) > st.gap_flag),

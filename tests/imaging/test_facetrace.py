@@ -253,6 +253,54 @@ def test_the_least_bend_of_a_dome_and_of_a_flat_topped_one():
     assert np.isnan(bend(600 * np.cos(low), 600 * np.sin(low)))
 
 
+def test_the_lift_of_the_first_frames_film_over_the_well():
+    """_flat_lift on a face drawn as a sharp silhouette (a smoothed step, noise 0.02): flat, 0; a paraboloid dome of
+    height H over the rim disc (V = pi a^2 H / 2), its layer H / 2 within 0.06 px; tilted by 1 px across the field
+    (the most _check_upright lets through) with no dome, 0; a speck 8 px wide on the face over the well, 0 (each
+    0 within 0.03); the face too near the field's edge, or no columns beside the well, no word (nan)."""
+    from types import SimpleNamespace
+
+    from osmobulge.imaging._facetrace import _flat_lift
+
+    rng = np.random.default_rng(3)
+    shape, top, axis, rim = (400, 900), 300.0, 450.0, 250.0
+    rows, cols = np.mgrid[: shape[0], : shape[1]].astype(float)
+    w = SimpleNamespace(top_row=top, rim_radius=rim, axis_col=axis)
+
+    def face(lift):  # (the face's row per column at top - lift: dark just below it, fading over 2 px)
+        return -1.0 / (1.0 + np.exp(-(rows - (top - lift[None, :])) / 1.0)) + rng.normal(0.0, 0.02, shape)
+
+    u = np.arange(shape[1]) - axis
+    flat = np.zeros(shape[1])
+    assert abs(_flat_lift(face(flat), w, 20.0)) < 0.03  # (10 seeds: within 0.017, a dome's error too)
+    for height in (1.0, 3.0, 8.0):
+        dome = np.where(np.abs(u) < rim, height * (1.0 - (u / rim) ** 2), 0.0)
+        assert _flat_lift(face(dome), w, 20.0) == pytest.approx(0.5 * height, abs=0.06), height
+    assert abs(_flat_lift(face(u / shape[1]), w, 20.0)) < 0.03  # (tilted: one side up, the other down)
+    specked = face(flat)
+    specked[int(top) - 4 : int(top) + 4, 500:508] = 1.0
+    assert abs(_flat_lift(specked, w, 20.0)) < 0.03
+    assert np.isnan(_flat_lift(face(flat)[:310], w, 20.0))  # (the face's rows run out of the frame)
+    assert np.isnan(_flat_lift(face(flat), w, 20.0, bounds=(axis - rim - 12.0, axis + rim + 12.0)))
+
+
+def test_a_first_frame_with_a_low_dome_flags_every_frame():
+    """halo from Vtilde 0.005 (a dome 2.5 px high, a 1.25 px layer: 2.5 volume tolerances): the first frame is the
+    reference every change is measured from, so each frame is poor_fit (flat_lift) saying why, its figure 0.3-1.0 of
+    the true layer (a low dome's silhouette fades into the face: measured 0.53 px).  Before, frame 0 read flat and ok
+    (2.5x the tolerance) and frames 1-2 ok at 1.7x and 1.3x (the dome's sign was learned from the old dome's ghost)."""
+    s = render_look("halo", [0.005, 0.6, 1.2, 2.0], shape=SHAPE, lambda_pre=PRE)
+    ds = _extract(s)
+    assert ds.attrs["tracer"] == "silhouette"
+    # (said before the events and the outline's gates: frames 2-3 read least_bend and fractured, traced on the ghost)
+    assert set(ds.flag.values) == {"poor_fit"} and set(ds.flag_figure.values) == {"flat_lift"}
+    layer = float(s.truth.volume[0] / (np.pi * s.truth.rim_radius[0] ** 2)) / s.truth.attrs["pixel_size"]
+    assert layer == pytest.approx(1.25, rel=0.01)
+    assert 0.3 * layer < float(ds.flag_value[0]) < layer
+    message = str(ds.message.values[1])
+    assert "the first frame is not flat" in message and "reference_frame=" in message
+
+
 def test_a_noisy_look_smooths_its_face_by_its_own_scatter(monkeypatch):
     """edge_dark with 8x its read noise (0.08 of full scale): the face's points scatter 0.34-0.37 px, above
     _FACE_SIGMA, and set the spline's smoothing; every frame ok and within 0.6 of the volume tolerance (0.39
