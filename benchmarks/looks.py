@@ -29,7 +29,10 @@ bottom one), as a microscope's export with annotations does.  ``--focus-drift UM
 moves the focal plane by that much from the first frame to the last (the painted
 looks have none: unchanged), and ``--dilution`` dilutes the salt solution by the
 water that came in (``Optics.dilution``).  ``--jpeg Q`` reads every frame as an
-8-bit JPEG at quality Q (a video or a small export).
+8-bit JPEG at quality Q (a video or a small export).  ``--debris N`` draws N
+particles drifting in the water in every frame after the first, each at a new
+place (``Nuisances.debris``).  ``--start V0`` starts the series at Vtilde V0
+(the same spacing, scaled): a first frame that is not flat.
 """
 
 from __future__ import annotations
@@ -68,24 +71,24 @@ def _as_jpeg(frames, quality):
     return np.stack(out)
 
 
-def _nuisances(name, n, events=None, stamp="none", focus_drift=0.0):
-    """The look's nuisances with the events of ``--events`` in a series of n frames, the ``--stamp`` and the
-    ``--focus-drift`` (m; none for a painted look)."""
+def _nuisances(name, n, events=None, stamp="none", focus_drift=0.0, debris=0):
+    """The look's nuisances with the events of ``--events`` in a series of n frames, the ``--stamp``, the
+    ``--focus-drift`` (m; none for a painted look) and the ``--debris``."""
     look = _look(name)
     torn = {} if events is None else {"delaminated_frames": (n // 3,), "fractured_frames": (n // 2, n - 2), **{
         "gap": {"fracture_gap": 0.15}, "polar": {"fracture_gap": 0.4},
         "collapsed": {"fracture_mode": "collapsed"}}[events]}
     focus = focus_drift if look.optics is not None else 0.0
-    return replace(look.nuisances, time_stamp=stamp, focus_drift=focus, **torn)
+    return replace(look.nuisances, time_stamp=stamp, focus_drift=focus, debris=debris, **torn)
 
 
-def row(name, vt, events=None, stamp="none", focus_drift=0.0, dilution=False, jpeg=None):
+def row(name, vt, events=None, stamp="none", focus_drift=0.0, dilution=False, jpeg=None, debris=0):
     t0 = time.perf_counter()
     optics = _look(name).optics
     if optics is not None and dilution:
         optics = replace(optics, dilution=True)
-    s = render_look(name, vt, lambda_pre=PRE, nuisances=_nuisances(name, len(vt), events, stamp, focus_drift),
-                    optics=optics)
+    s = render_look(name, vt, lambda_pre=PRE,
+                    nuisances=_nuisances(name, len(vt), events, stamp, focus_drift, debris), optics=optics)
     t_render = time.perf_counter() - t0
     a, h, l0 = (s.truth.attrs[k] for k in ("chamber_radius", "chamber_depth", "membrane_thickness"))
     frames = s.frames if jpeg is None else _as_jpeg(s.frames, jpeg)
@@ -119,8 +122,14 @@ def main():
     ap.add_argument("--dilution", action="store_true",
                     help="the salt solution diluted by the water that came in (optics looks)")
     ap.add_argument("--jpeg", type=int, metavar="Q", help="read the frames as 8-bit JPEGs at quality Q (1-95)")
+    ap.add_argument("--debris", type=int, default=0, metavar="N",
+                    help="N particles drifting in the water in every frame after the first")
+    ap.add_argument("--start", type=float, default=0.0, metavar="V0",
+                    help="the first frame's Vtilde (a series that starts bulged)")
     args = ap.parse_args()
     vt = np.linspace(0.0, 4.0, args.frames) ** 1.5 / 2.0
+    if args.start:
+        vt = args.start + (4.0 - args.start) * vt / 4.0
     head = ("| look                 | route | worst dV/tol (ok) | V ok | rim bias px (median) | worst rim px |"
             " worst dlambda | flagged | events flagged | silent | render/frame | extract/frame |\n"
             "|---|---|---|---|---|---|---|---|---|---|---|---|")
@@ -134,10 +143,13 @@ def main():
         events += "" if args.focus_drift == 0.0 else f" (focus drift: {args.focus_drift:+g} um)"
         events += " (liquid diluted)" if args.dilution else ""
         events += "" if args.jpeg is None else f" (JPEG, quality {args.jpeg})"
+        events += "" if not args.debris else f" (debris: {args.debris} a frame)"
+        events += "" if not args.start else f" (first frame at Vtilde {args.start:g})"
         print(f"\n## {title}{events}: Vtilde {', '.join(f'{x:.2f}' for x in vt)}\n")
         print(head)
         for name in looks:
-            print(row(name, vt, args.events, args.stamp, args.focus_drift * 1e-6, args.dilution, args.jpeg),
+            print(row(name, vt, args.events, args.stamp, args.focus_drift * 1e-6, args.dilution, args.jpeg,
+                      args.debris),
                   flush=True)
 
 

@@ -208,6 +208,15 @@ class Nuisances:
         time (a microscope's focus drifting over a day without autofocus):
         frame ``i`` is rendered with ``optics.defocus + focus_drift (t_i -
         t_0)/(t_last - t_0)``.  Optics only.
+    debris : int
+        Particles drifting in the water in front of the device, this many in
+        every frame after the first (none in the flat first frame): each a
+        blurred dark disc as a dust speck is (radius drawn from
+        ``debris_radius``, px, its opacity up to ``dust_opacity``), at a new
+        place in every frame, anywhere in the field (a stream of its own: the
+        other draws are as without it).  Their places are the truth's
+        ``debris`` attr.
+    debris_radius : tuple of float, px
     """
 
     polarity: int = 1
@@ -236,6 +245,8 @@ class Nuisances:
     fracture_gap: float = 0.15
     time_stamp: str = "none"
     focus_drift: float = 0.0
+    debris: int = 0
+    debris_radius: tuple = (4.0, 12.0)
 
     def __post_init__(self):
         if self.polarity not in (1, -1):
@@ -267,12 +278,13 @@ class Nuisances:
             v = getattr(self, name)
             if not (isinstance(v, int | float) and math.isfinite(v) and lo <= v <= hi):
                 raise ValueError(f"{name} must be a number in [{lo}, {hi}], got {v!r}")
-        if not (isinstance(self.dust_count, int) and self.dust_count >= 0):
-            raise ValueError(f"dust_count must be an int >= 0, got {self.dust_count!r}")
-        dr = tuple(float(x) for x in self.dust_radius)
-        if len(dr) != 2 or not (0 < dr[0] <= dr[1]):
-            raise ValueError(f"dust_radius must be (min, max) px with 0 < min <= max, got {self.dust_radius!r}")
-        object.__setattr__(self, "dust_radius", dr)
+        for count, radius in (("dust_count", "dust_radius"), ("debris", "debris_radius")):
+            if not (isinstance(getattr(self, count), int) and getattr(self, count) >= 0):
+                raise ValueError(f"{count} must be an int >= 0, got {getattr(self, count)!r}")
+            dr = tuple(float(x) for x in getattr(self, radius))
+            if len(dr) != 2 or not (0 < dr[0] <= dr[1]):
+                raise ValueError(f"{radius} must be (min, max) px with 0 < min <= max, got {getattr(self, radius)!r}")
+            object.__setattr__(self, radius, dr)
         nb = []
         for item in self.neighbours:
             try:
@@ -316,7 +328,7 @@ class Nuisances:
             elif f.name == "neighbours":
                 v = np.asarray(v, float).ravel() if v else "none"
             elif isinstance(v, tuple):
-                v = np.asarray(v, float if f.name == "dust_radius" else np.int64) if v else "none"
+                v = np.asarray(v, float if f.name.endswith("_radius") else np.int64) if v else "none"
             out[f"nuisance_{f.name}"] = v
         return out
 
@@ -609,16 +621,18 @@ def _illumination(shape, nuis: Nuisances):
     return field_.astype(np.float32)
 
 
-def _dust(shape, nuis: Nuisances, rng):
-    """Multiplicative dust transmission (float32) and the specks' parameters."""
+def _dust(shape, nuis: Nuisances, rng, n=None, radius=None):
+    """Multiplicative dust transmission (float32) and the specks' parameters (``(x, y, radius, opacity)`` px each;
+    ``n`` of them of ``radius``, default the dust's)."""
     rows, cols = shape
-    n = nuis.dust_count
+    n = nuis.dust_count if n is None else n
+    radius = nuis.dust_radius if radius is None else radius
     specks = (
         np.column_stack(
             [
                 rng.uniform(0, cols, n),
                 rng.uniform(0, rows, n),
-                rng.uniform(nuis.dust_radius[0], nuis.dust_radius[1], n),
+                rng.uniform(radius[0], radius[1], n),
                 rng.uniform(0.5, 1.0, n) * nuis.dust_opacity,
             ]
         )
@@ -1023,6 +1037,7 @@ def render_series(
     dtype = np.uint8 if nuis.bit_depth == 8 else np.uint16
     frames = np.empty((n_t, rows, cols), dtype)
     gains = np.ones(n_t)
+    debris = []  # (frame, x, y, radius, opacity) of the particles drifting in the water
     if nuis.exposure_sigma > 0 and n_t > 1:  # (a stream of its own: the other draws as without it)
         rng_exposure = np.random.default_rng(np.random.SeedSequence(int(seed), spawn_key=(8,)))
         gains[1:] = np.clip(1.0 + nuis.exposure_sigma * rng_exposure.standard_normal(n_t - 1), 0.3, 2.0)
@@ -1043,7 +1058,13 @@ def render_series(
         else:
             img = sc.render_optical(fr, drift[i], _frame_optics(optics, nuis, v[i], times, i, a, h), nuis.blur_sigma)
         rng_noise = np.random.default_rng(np.random.SeedSequence(int(seed), spawn_key=(7, i)))
-        frames[i] = _finish(img, nuis, illum, dust, rng_noise, float(gains[i]))
+        shade = dust
+        if nuis.debris and i > 0:  # (particles drifting in the water: a stream of their own, new places each frame)
+            rng_debris = np.random.default_rng(np.random.SeedSequence(int(seed), spawn_key=(9, i)))
+            passing, where = _dust((rows, cols), nuis, rng_debris, nuis.debris, nuis.debris_radius)
+            shade = passing if dust is None else dust * passing
+            debris.append(np.column_stack((np.full(len(where), i), where)))
+        frames[i] = _finish(img, nuis, illum, shade, rng_noise, float(gains[i]))
         if nuis.time_stamp != "none":
             frames[i] = _stamp(frames[i], times[i] - times[0], nuis.time_stamp, p, nuis.bit_depth)
 
@@ -1076,6 +1097,7 @@ def render_series(
         truth["light_gain"] = ("time", gains, {"units": "1", "long_name": "the frame's light over the first "
                                                 "frame's (the lamp, the exposure)"})
     truth.attrs["dust_specks"] = specks.ravel() if specks.size else "none"
+    truth.attrs["debris"] = np.vstack(debris).ravel() if debris else "none"
     if hasattr(chamber, "to_attrs"):  # a modeling Chamber: its loading too (Chamber.from_attrs round-trips)
         truth.attrs.update({k: float(v) for k, v in chamber.to_attrs().items()})
     return SyntheticSeries(frames=frames, truth=truth)

@@ -301,6 +301,21 @@ def test_a_first_frame_with_a_low_dome_flags_every_frame():
     assert "the first frame is not flat" in message and "reference_frame=" in message
 
 
+def test_debris_drifting_past_the_dome_is_flagged_or_read_right():
+    """halo with 20 particles drifting in the water in every frame after the first (Nuisances.debris, each a dark
+    blur of 4-12 px, as dark as the dome's change): no frame silently wrong.  Measured: frame 1 (Vtilde 0.05, a dome
+    25 px high, a particle 21 px off its face) fractured, 22x the tolerance off; frame 2 (particles 18 and 24 px off
+    the face) poor_fit least_bend, its volume right (0.28 of the tolerance); frame 3 ok within 0.02.  With 10
+    particles every frame read ok, within 0.16."""
+    s = render_look("halo", VT, shape=SHAPE, lambda_pre=PRE, nuisances=replace(LOOKS["halo"].nuisances, debris=20))
+    ds = _extract(s)
+    sc = score(s.truth, ds)
+    assert sc["n_silent"] == 0 and ds.flag.values[0] == "ok" and ds.flag.values[-1] == "ok"
+    ok = ds.flag.values == "ok"
+    assert np.all(sc["dv_tol"][ok] <= 1.0), sc["dv_tol"]
+    assert ds.flag.values[1] != "ok" and sc["dv_tol"][1] > 1.0  # (the lost frame is flagged, not read ok)
+
+
 def test_a_noisy_look_smooths_its_face_by_its_own_scatter(monkeypatch):
     """edge_dark with 8x its read noise (0.08 of full scale): the face's points scatter 0.34-0.37 px, above
     _FACE_SIGMA, and set the spline's smoothing; every frame ok and within 0.6 of the volume tolerance (0.39

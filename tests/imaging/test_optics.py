@@ -317,6 +317,36 @@ def test_focus_drift_and_dilution_render_each_frame_in_its_own_optics():
         Optics(dilution=1)
 
 
+def test_debris_drifts_through_every_frame_after_the_first():
+    """Nuisances(debris=N): N particles in each frame after the first, each a blurred dark disc at a new place (the
+    truth's ``debris`` attr, frame by frame); the first frame, and every pixel outside the squares of 4 radii about
+    them, as without debris (their own random stream); the darkening at each centre is its opacity."""
+    ch, p = (150e-6, 110e-6, 20e-6), 1.6e-6
+    kw = {"chamber": ch, "pixel_size": p, "shape": (420, 400), "optics": Optics(), "seed": 5}
+    nu = Nuisances(blur_sigma=0.5)
+    plain = render_series([0.0, 1.0, 2.0], nuisances=nu, **kw)
+    s = render_series([0.0, 1.0, 2.0], nuisances=replace(nu, debris=4, debris_radius=(3.0, 6.0)), **kw)
+    d = s.truth.attrs["debris"].reshape(-1, 5)  # (frame, x, y, radius, opacity)
+    assert d.shape == (8, 5) and list(np.unique(d[:, 0])) == [1, 2]
+    assert np.all((d[:, 3] >= 3.0) & (d[:, 3] <= 6.0))
+    assert not np.allclose(d[d[:, 0] == 1, 1:3], d[d[:, 0] == 2, 1:3])  # (new places)
+    np.testing.assert_array_equal(s.frames[0], plain.frames[0])
+    rows, cols = np.mgrid[:420, :400]
+    for i in (1, 2):
+        near = np.zeros((420, 400), bool)
+        for _, x, y, r, op in d[d[:, 0] == i]:
+            near |= (np.abs(cols - x) <= np.ceil(4.0 * r) + 1) & (np.abs(rows - y) <= np.ceil(4.0 * r) + 1)
+            if 2 <= x < 398 and 2 <= y < 418:  # (the centre's darkening, within the 16-bit rounding)
+                ratio = s.frames[i][int(round(y)), int(round(x))] / plain.frames[i][int(round(y)), int(round(x))]
+                assert ratio == pytest.approx(1.0 - op, abs=0.02)
+        np.testing.assert_array_equal(s.frames[i][~near], plain.frames[i][~near])
+        assert np.any(s.frames[i][near] != plain.frames[i][near])
+    with pytest.raises(ValueError, match="debris"):
+        Nuisances(debris=-1)
+    with pytest.raises(ValueError, match="debris_radius"):
+        Nuisances(debris_radius=(5.0, 2.0))
+
+
 def test_optics_rejects_bad_input():
     with pytest.raises(ValueError, match="n_elastomer"):
         Optics(n_elastomer=0.5)
