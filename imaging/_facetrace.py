@@ -456,12 +456,14 @@ def _flat_lift(dev, w, l0, bounds=None, up=12, reach=12):
     The top face's profile (``up`` rows above it to half the film below), the
     mean of each side's median over the columns beside the well (10 px beyond
     the rims, within ``bounds``, the columns half-way to the neighbouring
-    wells), is found in each
-    bin of ``_LIFT_BIN_PX`` columns over the well (5 px inside the rims) by its
-    normalised cross-correlation, within ``reach`` rows up or down (a
-    parabola's vertex between rows), and the bins' lifts pass a running median
-    of 5 (a speck on the face).  A tilt of the view lifts one side and lowers
-    the other: the mean of the two sides' solids leaves it out.
+    wells), is found in each bin of ``_LIFT_BIN_PX`` columns over the well
+    (5 px inside the rims) by its normalised cross-correlation, within
+    ``reach`` rows up or down (a parabola's vertex between rows), and the
+    bins' lifts pass a running median of 5 (a speck on the face).  A tilt of
+    the view lifts one side and lowers the other: the mean of the two sides'
+    solids leaves it out.  nan (no word) when the rows run out of the frame
+    or fewer than 10 columns lie beside the well (neighbours nearer than
+    about 2.2 radii).
     """
     top, rim, axis = w.top_row, w.rim_radius, w.axis_col
     r0, r1 = int(np.floor(top)) - up, int(np.ceil(top + 0.5 * l0))
@@ -986,7 +988,7 @@ class SilhouetteTracer:
         if out.flag_figure == "flat_lift":
             out.message = (f"the first frame is not flat: its film over the well stands {self.flat_lift:+.2f} px above "
                            f"the top face beside the well (a layer over the rim disc; a low dome's silhouette reads "
-                           f"0.2-0.8 of its own), and every frame's change is measured from it as the flat membrane: "
+                           f"under its own), and every frame's change is measured from it as the flat membrane: "
                            f"give a frame of the flat membrane (reference_frame=), pick the profiles by hand, or keep "
                            f"the frames you judge right (curation: keep flagged)")
         elif out.flag_figure == "flat_film":
