@@ -450,7 +450,7 @@ def _film_thickness(d, top_row, left, right, guess):
 
 def _flat_lift(dev, w, l0, bounds=None, up=12, reach=12):
     """The first frame's film over the well: its mean lift above the top face beside the well (px over the rim
-    disc, as a layer: the solid of revolution of each side's lifts, the two sides' mean), or nan.
+    disc, as a layer: the two sides' mean solid of revolution of the lifts, :func:`revolution_measures`), or nan.
 
     ``dev``: the view's signed deviation from the light (:class:`FlatMaps`).
     The top face's profile (``up`` rows above it to half the film below), the
@@ -494,13 +494,9 @@ def _flat_lift(dev, w, l0, bounds=None, up=12, reach=12):
     i = np.arange(n_bins)
     off = np.where((j > 0) & (j < cc.shape[1] - 1), _vertex(cc[i, inner - 1], cc[i, inner], cc[i, inner + 1]), 0.0)
     lift = ndimage.median_filter(reach - (j + off), 5, mode="nearest")  # (a window starting reach - L rows up)
-    r = np.abs(c0 + (i + 0.5) * _LIFT_BIN_PX - axis)
-    half = n_bins // 2
-    solids = []
-    for rs, zs in ((r[:half][::-1], lift[:half][::-1]), (r[n_bins - half :], lift[n_bins - half :])):  # axis -> rim
-        rs, zs = np.r_[0.0, rs, rim], np.r_[zs[0], zs, 0.0]
-        solids.append(2.0 * np.pi * np.trapezoid(zs * rs, rs))
-    return float(np.mean(solids) / (np.pi * rim**2))
+    x = c0 + (i + 0.5) * _LIFT_BIN_PX - axis
+    m = revolution_measures(np.r_[-rim, x, rim], np.r_[0.0, lift, 0.0])  # (signed: a sag is a negative solid)
+    return float(m.volume / (np.pi * rim**2))
 
 
 def _first_edges(v, t, sign, noise, size=9):
@@ -835,7 +831,8 @@ class SilhouetteTracer:
             0.5 * (nb[1] + w.right) if np.isfinite(nb[1]) else np.inf)
         self._nb = nb  # (the neighbours' nearest walls' columns, view, first frame)
         # the film over the well must lie on the top face: every frame's change is measured from this frame
-        self.flat_lift = _flat_lift(np.rot90(maps.deviation, self.k), w, self.l0, self.bounds)
+        dev = np.rot90(maps.deviation, self.k)
+        self.flat_lift = _flat_lift(dev, w, self.l0, self.bounds)
         self._lim = None  # (per row, the columns the dome is searched for between, once a gap was measured)
         self._lim_next = None  # (this frame's measured ones, for the next frame)
         self._side_seen = None  # (the first frame a dome came in at the field's side in, :meth:`_side_gap`)
@@ -843,7 +840,7 @@ class SilhouetteTracer:
         # :meth:`_side_gap`; mapped when first asked for, :meth:`_clear_of_specks`)
         top = max(int(w.top_row), 1)
         self._speck_map = None
-        self._speck_src = (np.rot90(maps.deviation, self.k)[:top],
+        self._speck_src = (dev[:top],
                            np.rot90(maps.values, self.k)[:top] == maps.values.max())
         self._rim0 = (w.axis_col - w.left, w.right - w.axis_col)  # the film's material rim radii (:func:`_thickness`)
         self.polarity = 0  # the dome's sign (+1 darker than the water), from the first frame showing it
