@@ -49,6 +49,9 @@ _FIGURES = {
                           "(1: a circle; 0: a straight stretch, as a cap torn off leaves)"),
     "light_gain": ("1", "silhouette route: the base's mean light over the first frame's (the lamp, the exposure; "
                         "a frame more than 5 % off is divided by it before it is read)"),
+    "light_tilt": ("1", "silhouette route: how much the light changed across the view since the first frame (the "
+                        "range of a plane through the water's change; divided out of a frame whose noise it raised "
+                        "by over 25 %)"),
 }
 
 #: how the chamber and dome are read: ``band`` (filled membrane band, grey step between well and base) or

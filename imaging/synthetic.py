@@ -217,6 +217,12 @@ class Nuisances:
         other draws are as without it).  Their places are the truth's
         ``debris`` attr.
     debris_radius : tuple of float, px
+    light_drift : float
+        The illumination's gradient changes by this much from the first frame
+        to the last, linear in time, along ``illumination_angle`` (a lamp, a
+        condenser or a window warming one side of the field over a day): frame
+        ``i``'s gradient is ``illumination_gradient + light_drift (t_i -
+        t_0)/(t_last - t_0)`` (-0.9 .. 0.9 each).
     """
 
     polarity: int = 1
@@ -247,6 +253,7 @@ class Nuisances:
     focus_drift: float = 0.0
     debris: int = 0
     debris_radius: tuple = (4.0, 12.0)
+    light_drift: float = 0.0
 
     def __post_init__(self):
         if self.polarity not in (1, -1):
@@ -273,6 +280,7 @@ class Nuisances:
             "fracture_gap": (0.01, 0.9),
             "illumination_angle": (-360.0, 360.0),
             "focus_drift": (-5e-4, 5e-4),
+            "light_drift": (-0.9 - self.illumination_gradient, 0.9 - self.illumination_gradient),
         }
         for name, (lo, hi) in ranges.items():
             v = getattr(self, name)
@@ -608,15 +616,17 @@ class _Scene:
         )
 
 
-def _illumination(shape, nuis: Nuisances):
-    """Multiplicative illumination field (float32) or None when uniform."""
-    if nuis.illumination_gradient == 0 and nuis.vignetting == 0:
+def _illumination(shape, nuis: Nuisances, gradient=None):
+    """Multiplicative illumination field (float32) or None when uniform (``gradient``: instead of the
+    nuisances')."""
+    gradient = nuis.illumination_gradient if gradient is None else gradient
+    if gradient == 0 and nuis.vignetting == 0:
         return None
     rows, cols = shape
     y, x = np.mgrid[0:rows, 0:cols].astype(np.float32)
     xc, yc = (x - (cols - 1) / 2) / (cols / 2), ((rows - 1) / 2 - y) / (rows / 2)
     th = math.radians(nuis.illumination_angle)
-    field_ = 1.0 + nuis.illumination_gradient * (xc * math.cos(th) + yc * math.sin(th))
+    field_ = 1.0 + gradient * (xc * math.cos(th) + yc * math.sin(th))
     field_ *= 1.0 - nuis.vignetting * (xc**2 + yc**2) / 2.0
     return field_.astype(np.float32)
 
@@ -1064,7 +1074,11 @@ def render_series(
             passing, where = _dust((rows, cols), nuis, rng_debris, nuis.debris, nuis.debris_radius)
             shade = passing if dust is None else dust * passing
             debris.append(np.column_stack((np.full(len(where), i), where)))
-        frames[i] = _finish(img, nuis, illum, shade, rng_noise, float(gains[i]))
+        light = illum
+        if nuis.light_drift != 0.0 and times[-1] != times[0]:  # (the light's gradient drifting over the series)
+            light = _illumination((rows, cols), nuis, nuis.illumination_gradient
+                                  + nuis.light_drift * (times[i] - times[0]) / (times[-1] - times[0]))
+        frames[i] = _finish(img, nuis, light, shade, rng_noise, float(gains[i]))
         if nuis.time_stamp != "none":
             frames[i] = _stamp(frames[i], times[i] - times[0], nuis.time_stamp, p, nuis.bit_depth)
 

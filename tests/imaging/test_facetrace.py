@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from osmobulge.imaging._chamber import ChamberNotFound
-from osmobulge.imaging._facetrace import SilhouetteTracer, _profiles, dark_background
+from osmobulge.imaging._facetrace import SilhouetteTracer, _light_plane, _profiles, dark_background
 from osmobulge.imaging.extract import extract
 from osmobulge.imaging.looks import LOOKS, render_look, score
 from osmobulge.imaging.synthetic import SceneGeometry
@@ -314,6 +314,46 @@ def test_debris_drifting_past_the_dome_is_flagged_or_read_right():
     ok = ds.flag.values == "ok"
     assert np.all(sc["dv_tol"][ok] <= 1.0), sc["dv_tol"]
     assert ds.flag.values[1] != "ok" and sc["dv_tol"][1] > 1.0  # (the lost frame is flagged, not read ok)
+
+
+def test_the_light_plane_through_a_domes_change():
+    """_light_plane: a plane (0.02 + 1e-4 col - 5e-5 row) under noise of 0.01, with a dome's lines (change -0.5,
+    3 px wide, where each row crosses a circle) and the band over its pole (-0.3 over 150 columns of the two rows
+    it touches) as outliers: its coefficients within 5 % of the plane's change over 1000 px; no plane from fewer
+    than 6 finite medians."""
+    rng = np.random.default_rng(3)
+    rows = np.linspace(2.0, 400.0, 12)
+    cols = np.arange(0.0, 1000.0)[None, :] + 0.5 * (np.arange(12) % 2)[:, None]
+    want = np.array([0.02, 1e-4, -5e-5])
+    v = want[0] + want[1] * cols + want[2] * rows[:, None] + 0.01 * rng.standard_normal(cols.shape)
+    for i, r in enumerate(rows):  # (a dome of radius 380 px about (500, 420): its outline's two crossings)
+        half = np.sqrt(max(380.0**2 - (420.0 - r) ** 2, 0.0))
+        for c in (500.0 - half, 500.0 + half):
+            v[i, np.abs(cols[i] - c) < 1.5] = -0.5
+    v[:2, 425:575] = -0.3
+    got = _light_plane(v, cols, rows)
+    assert abs(got[0] - want[0]) < 0.05 * 0.1 and np.all(np.abs(got[1:] - want[1:]) * 1000.0 < 0.05 * 0.1)
+    assert _light_plane(np.full((1, 80), np.nan), cols[:1, :80], rows[:1]) is None
+
+
+def test_light_whose_gradient_drifts_is_divided_out():
+    """halo with the light's gradient across the field drifting by 0.2 over the series (Nuisances.light_drift: the
+    last frame's light +-20 % at the field's sides against the first's; a lamp or a window warming one side): the
+    plane through the water's change (``light_tilt``, its range over the view) reads the drift, and every frame is
+    ok and within the volume tolerance.  Before the tilt was divided out it raised the change's noise (0.010 ->
+    0.075 with +-10 % by the last of 9 frames) until the dome's contrast fell below 10x it: frames read no dome
+    (poor_fit dome_contrast)."""
+    s = render_look("halo", VT, shape=SHAPE, lambda_pre=PRE,
+                    nuisances=replace(LOOKS["halo"].nuisances, light_drift=0.2))
+    ds = _extract(s)
+    sc = score(s.truth, ds)
+    assert list(ds.flag.values) == ["ok"] * len(VT), list(ds.flag_figure.values)
+    assert np.all(sc["dv_tol"] <= 1.0), sc["dv_tol"]
+    want = 0.4 * np.arange(len(VT)) / (len(VT) - 1)  # (0.2 from the field's centre to its side: 0.4 across it)
+    np.testing.assert_allclose(ds.light_tilt.values, want, rtol=0.15, atol=0.01)
+    plain = _extract(render_look("halo", VT, shape=SHAPE, lambda_pre=PRE))
+    assert np.all(plain.light_tilt.values < 0.01)  # (a light that did not change: no tilt, read as before)
+    np.testing.assert_allclose(ds.volume.values, plain.volume.values, rtol=0.01)
 
 
 def test_a_noisy_look_smooths_its_face_by_its_own_scatter(monkeypatch):
@@ -796,7 +836,8 @@ def test_the_noise_is_the_changes_spread_over_the_water(edge_dark):
     def sample(points, directions, offsets, own=True):  # (no neighbours: the same either way)
         return tr._change(frame, points, directions, offsets, dx, dy)
 
-    got = tr._noise(sample, w)
+    got, tilt, _ = tr._noise(sample, w)
+    assert tilt is None  # (the light did not change)
     rows = np.linspace(2.0, w.top_row - 5.0, 64)
     v = sample(np.column_stack((np.zeros_like(rows), rows)), np.tile([1.0, 0.0], (64, 1)),
                np.arange(0.0, tr.view_shape[1] - 1.0, 0.5))

@@ -347,6 +347,32 @@ def test_debris_drifts_through_every_frame_after_the_first():
         Nuisances(debris_radius=(5.0, 2.0))
 
 
+def test_the_lights_gradient_drifts_over_the_series():
+    """Nuisances(light_drift=d): frame i's light is the field of gradient g + d (t_i - t_0)/(t_last - t_0) along the
+    illumination angle: its ratio to the same series without the drift is (1 + g_i s) / (1 + g s), s the
+    position along the angle (-1 .. 1 from the field's centre to its side), within the rounding (no noise); the
+    first frame as without it."""
+    ch, p = (150e-6, 110e-6, 20e-6), 1.6e-6
+    kw = {"chamber": ch, "pixel_size": p, "shape": (420, 400), "optics": Optics(), "seed": 5,
+          "times": [0.0, 600.0, 2400.0]}
+    nu = Nuisances(blur_sigma=0.5, illumination_gradient=0.1, illumination_angle=30.0)
+    plain = render_series([0.0, 1.0, 2.0], nuisances=nu, **kw)
+    s = render_series([0.0, 1.0, 2.0], nuisances=replace(nu, light_drift=-0.2), **kw)
+    np.testing.assert_array_equal(s.frames[0], plain.frames[0])
+    rows, cols = np.mgrid[:420, :400]
+    xc, yc = (cols - 199.5) / 200.0, (209.5 - rows) / 210.0
+    along = xc * np.cos(np.radians(30.0)) + yc * np.sin(np.radians(30.0))
+    for i, frac in ((1, 0.25), (2, 1.0)):
+        want = (1.0 + (0.1 - 0.2 * frac) * along) / (1.0 + 0.1 * along)
+        lit = plain.frames[i] > 1000
+        got = s.frames[i][lit].astype(float) / plain.frames[i][lit]
+        # (each frame rounded to whole counts: half a count of each over the plain frame's counts, and float32's)
+        assert np.all(np.abs(got - want[lit]) <= 1.0 / plain.frames[i][lit] + 1e-5)
+        assert lit.mean() > 0.9
+    with pytest.raises(ValueError, match="light_drift"):
+        Nuisances(illumination_gradient=0.5, light_drift=0.5)  # (a gradient of 1: black at one side)
+
+
 def test_optics_rejects_bad_input():
     with pytest.raises(ValueError, match="n_elastomer"):
         Optics(n_elastomer=0.5)
