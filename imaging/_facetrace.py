@@ -190,6 +190,9 @@ _GAIN_TOL = 0.05
 #: a plane fitted to the water's change (:func:`_light_plane`, on ``_TILT_BINS`` bins of columns a noise row)
 #: divided out of the change when it raised the noise more than ``_TILT_NOISE`` times
 _TILT_BINS, _TILT_NOISE = 16, 1.25
+#: the light's change over the walls' crop is fitted on every _LIGHT_ROWS-th row of it
+#: (:meth:`SilhouetteTracer._light_change`)
+_LIGHT_ROWS = 4
 #: the film beyond each foot checked for a lift (:meth:`SilhouetteTracer._rim_contact`): ``_LIFT_SPAN`` film
 #: thicknesses (at least ``_LIFT_MIN_PX``) from ``_LIFT_GAP`` px past the foot, against the change ``_LIFT_FAR``
 #: radii out from the rim
@@ -997,10 +1000,51 @@ class SilhouetteTracer:
         moved = np.clip(cols - int(round(dx)), 0, img.shape[1] - 1)
         crop = np.concatenate([img[lo:hi, a:b] for a, b in spans], axis=1)
         c0, c1 = spans[0][0], spans[-1][0] - (width0 if len(spans) == 2 else 0)  # (crop column -> view column)
+        light = self._bg[np.ix_(rows, moved)]
+        light = light + self._light_change(crop, rows, moved, light)
         w = find_walls(crop, self.l0, depth_px=self.depth, top_row=top - lo, strip=_STRIP,
-                       near=(left - c0, right - c1), light=self._bg[np.ix_(rows, moved)])
+                       near=(left - c0, right - c1), light=light)
         return replace(w, top_row=w.top_row + lo, base_row=w.base_row + lo, left=w.left + c0,
                        right=w.right + c1), dx, dy
+
+    def _light_change(self, crop, rows, moved, light):
+        """How much brighter this frame's light is than the first frame's over the walls' ``crop`` (view ``rows``
+        and ``moved`` columns of the first frame: the crop's less the drift to the pixel; ``light``: the first
+        frame's there), to be added to it: the plane ``a0 + a1 col + a2 row`` of this frame less the first, fitted
+        with a multiple of the first frame's departure from its light beside it (least squares over every
+        ``_LIGHT_ROWS``-th row, again without the pixels more than 3 scaled MADs off the first fit: the residue of
+        the drift's fraction of a px at the walls' edges).
+
+        Stray light (a window, the room's lamps) adds to the light the walls'
+        half level is read against, a lamp brighter or dimmer scales it (and
+        the gain step, a frame divided by its light's ratio, turns the one
+        into the other): this frame less the first is then ``s + (L - 1)
+        flat``, a smooth part (``s + (L - 1) light``, the plane) and a multiple
+        of the first frame's walls (``(L - 1) (flat - light)``, whose factor is
+        not needed: fitted, not returned, so a crop without much of a wall in it
+        leaves the plane as well determined).  Measured with stray light growing
+        to 20 % of full scale on one side of the halo look: against the first
+        frame's light the walls' zones were taken 6-10 px off and frames lost
+        (``wall_rms``).
+        """
+        sub = slice(None, None, _LIGHT_ROWS)
+        flat = np.rot90(self._flat, self.k)[np.ix_(rows[sub], moved)].astype(float)
+        diff = (crop[sub] - flat).ravel()
+        x, y = moved - moved.mean(), rows - rows.mean()
+        a = np.empty((diff.size, 4))
+        a[:, 0], a[:, 1], a[:, 2] = 1.0, np.tile(x, flat.shape[0]), np.repeat(y[sub], x.size)
+        a[:, 3] = (flat - light[sub]).ravel()
+        keep = np.isfinite(diff)
+        for last in (False, True):
+            ak = a[keep]  # (the normal equations of 4 unknowns)
+            try:
+                c = np.linalg.solve(ak.T @ ak, ak.T @ diff[keep])
+            except np.linalg.LinAlgError:  # (no wall in the crop: the factor is not determined, the plane is)
+                c = np.linalg.lstsq(ak.T @ ak, ak.T @ diff[keep], rcond=None)[0]
+            if not last:
+                r = diff - a @ c
+                keep &= np.abs(r) <= 3.0 * max(_mad(r[keep]), 1e-9)
+        return c[0] + c[1] * x[None, :] + c[2] * y[:, None]
 
     def process(self, frame, index=0, *, guide=None, manual=None):
         """Measure one frame (``guide`` is not needed by this route and ignored); returns a FrameTrace."""
@@ -1354,8 +1398,10 @@ class SilhouetteTracer:
         raw, plane = noise(v), _light_plane(v, at, rows)
         if plane is None:
             return raw, None, 0.0
-        grid = plane[0] + plane[1] * at + plane[2] * rows[:, None]
         tilt = float(abs(plane[1]) * self.view_shape[1] + abs(plane[2]) * self.view_shape[0])
+        if tilt <= 2.0 * raw:  # (a spread of range T adds T**2 / 12 to the variance: 1.15x the noise at T = 2 noise)
+            return raw, None, tilt
+        grid = plane[0] + plane[1] * at + plane[2] * rows[:, None]
         flat = noise((v - grid) / (1.0 + grid))
         return (flat, plane, tilt) if raw > _TILT_NOISE * flat else (raw, None, tilt)
 

@@ -223,6 +223,13 @@ class Nuisances:
         condenser or a window warming one side of the field over a day): frame
         ``i``'s gradient is ``illumination_gradient + light_drift (t_i -
         t_0)/(t_last - t_0)`` (-0.9 .. 0.9 each).
+    stray_light : float
+        Light added to the image (a window, the room's lamps; a fraction of
+        full scale), growing linearly in time from none in the first frame to
+        this much in the last at the side of the field ``illumination_angle``
+        points to, none at the other (``stray_light (t_i - t_0)/(t_last - t_0)
+        (1 + s)/2``, ``s`` the position along the angle, -1 .. 1 from the
+        field's centre to its side); before the noise (0 .. 1).
     """
 
     polarity: int = 1
@@ -254,6 +261,7 @@ class Nuisances:
     debris: int = 0
     debris_radius: tuple = (4.0, 12.0)
     light_drift: float = 0.0
+    stray_light: float = 0.0
 
     def __post_init__(self):
         if self.polarity not in (1, -1):
@@ -281,6 +289,7 @@ class Nuisances:
             "illumination_angle": (-360.0, 360.0),
             "focus_drift": (-5e-4, 5e-4),
             "light_drift": (-0.9 - self.illumination_gradient, 0.9 - self.illumination_gradient),
+            "stray_light": (0.0, 1.0),
         }
         for name, (lo, hi) in ranges.items():
             v = getattr(self, name)
@@ -616,6 +625,16 @@ class _Scene:
         )
 
 
+def _stray(shape, nuis: Nuisances, amount):
+    """Additive stray light (float32): ``amount`` at the field's side ``illumination_angle`` points to, none at the
+    other, linear between."""
+    rows, cols = shape
+    y, x = np.mgrid[0:rows, 0:cols].astype(np.float32)
+    xc, yc = (x - (cols - 1) / 2) / (cols / 2), ((rows - 1) / 2 - y) / (rows / 2)
+    th = math.radians(nuis.illumination_angle)
+    return (0.5 * amount * (1.0 + xc * math.cos(th) + yc * math.sin(th))).astype(np.float32)
+
+
 def _illumination(shape, nuis: Nuisances, gradient=None):
     """Multiplicative illumination field (float32) or None when uniform (``gradient``: instead of the
     nuisances')."""
@@ -694,9 +713,9 @@ def _blur(img, sigma):
     return out
 
 
-def _finish(img, nuis: Nuisances, illum, dust, rng, gain=1.0):
-    """Polarity, dust, illumination (its field and its frame's ``gain``), noise and quantisation of one (blurred)
-    frame."""
+def _finish(img, nuis: Nuisances, illum, dust, rng, gain=1.0, stray=None):
+    """Polarity, dust, illumination (its field and its frame's ``gain``), ``stray`` light (added), noise and
+    quantisation of one (blurred) frame."""
     if nuis.polarity < 0:
         img = 1.0 - img
     if dust is not None:
@@ -705,6 +724,8 @@ def _finish(img, nuis: Nuisances, illum, dust, rng, gain=1.0):
         img *= illum
     if gain != 1.0:
         img *= np.float32(gain)
+    if stray is not None:
+        img += stray
     photons, sigma = float(nuis.poisson_photons), float(nuis.noise_sigma)
     if 0 < photons < _POISSON_NORMAL:  # few photons: exact Poisson counts
         img = (rng.poisson(np.clip(img, 0.0, None) * photons) / photons).astype(np.float32)
@@ -1078,7 +1099,10 @@ def render_series(
         if nuis.light_drift != 0.0 and times[-1] != times[0]:  # (the light's gradient drifting over the series)
             light = _illumination((rows, cols), nuis, nuis.illumination_gradient
                                   + nuis.light_drift * (times[i] - times[0]) / (times[-1] - times[0]))
-        frames[i] = _finish(img, nuis, light, shade, rng_noise, float(gains[i]))
+        stray = None
+        if nuis.stray_light != 0.0 and times[-1] != times[0] and i > 0:  # (stray light growing over the series)
+            stray = _stray((rows, cols), nuis, nuis.stray_light * (times[i] - times[0]) / (times[-1] - times[0]))
+        frames[i] = _finish(img, nuis, light, shade, rng_noise, float(gains[i]), stray)
         if nuis.time_stamp != "none":
             frames[i] = _stamp(frames[i], times[i] - times[0], nuis.time_stamp, p, nuis.bit_depth)
 

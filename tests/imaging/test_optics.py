@@ -373,6 +373,30 @@ def test_the_lights_gradient_drifts_over_the_series():
         Nuisances(illumination_gradient=0.5, light_drift=0.5)  # (a gradient of 1: black at one side)
 
 
+def test_stray_light_grows_over_the_series_on_one_side():
+    """Nuisances(stray_light=s): frame i gains s (t_i - t_0)/(t_last - t_0) (1 + p)/2 of full scale, p the position
+    along the illumination angle (-1 .. 1), added to the frame without it (no noise: within the rounding); the first
+    frame as without it."""
+    ch, p = (150e-6, 110e-6, 20e-6), 1.6e-6
+    kw = {"chamber": ch, "pixel_size": p, "shape": (420, 400), "optics": Optics(), "seed": 5,
+          "times": [0.0, 600.0, 2400.0]}
+    nu = Nuisances(blur_sigma=0.5, illumination_angle=-60.0)
+    plain = render_series([0.0, 1.0, 2.0], nuisances=nu, **kw)
+    s = render_series([0.0, 1.0, 2.0], nuisances=replace(nu, stray_light=0.1), **kw)
+    np.testing.assert_array_equal(s.frames[0], plain.frames[0])
+    rows, cols = np.mgrid[:420, :400]
+    xc, yc = (cols - 199.5) / 200.0, (209.5 - rows) / 210.0
+    along = xc * np.cos(np.radians(-60.0)) + yc * np.sin(np.radians(-60.0))
+    unclipped = s.frames[2] < 65535
+    for i, frac in ((1, 0.25), (2, 1.0)):
+        got = (s.frames[i].astype(float) - plain.frames[i]) / 65535.0
+        want = 0.1 * frac * 0.5 * (1.0 + along)
+        assert np.all(np.abs(got - want)[unclipped] <= 1.0 / 65535.0 + 1e-6)
+    assert unclipped.mean() > 0.9
+    with pytest.raises(ValueError, match="stray_light"):
+        Nuisances(stray_light=-0.1)
+
+
 def test_optics_rejects_bad_input():
     with pytest.raises(ValueError, match="n_elastomer"):
         Optics(n_elastomer=0.5)
