@@ -190,6 +190,8 @@ _GAIN_TOL = 0.05
 #: a plane fitted to the water's change (:func:`_light_plane`, on ``_TILT_BINS`` bins of columns a noise row)
 #: divided out of the change when it raised the noise more than ``_TILT_NOISE`` times
 _TILT_BINS, _TILT_NOISE = 16, 1.25
+#: how far (px) from the last ok frame's dome the light's plane is not fitted (:meth:`_near_last_dome`)
+_DOME_ZONE_PX = 40.0
 #: the light's change over the walls' crop is fitted on every _LIGHT_ROWS-th row of it
 #: (:meth:`SilhouetteTracer._light_change`)
 _LIGHT_ROWS = 4
@@ -582,14 +584,17 @@ def _mad(v):
     return 1.4826 * median(np.abs(v - median(v)))
 
 
-def _light_plane(v, cols, rows, bins=_TILT_BINS, iters=3):
+def _light_plane(v, cols, rows, bins=_TILT_BINS, iters=3, exclude=None):
     """A plane ``(c0, c1, c2)``, ``c0 + c1 col + c2 row``, fitted to the change ``v`` of horizontal transects
     (one a row, at view ``rows``; its samples at view columns ``cols``, the same shape as ``v``) through the
     medians of ``bins`` runs of columns each, those more than 3 scaled MADs off the plane dropped ``iters`` times
     (a dome's lines and the band over its pole are outliers to it; its inside, liquid for water, has the water's
-    light), or None (fewer than 6 finite medians)."""
+    light), without the runs with a sample in ``exclude`` (a bool array like ``v``: a dyed film's band is not),
+    or None (fewer than 6 finite medians)."""
     n = (v.shape[1] // bins) * bins
     med = np.median(v[:, :n].reshape(v.shape[0], bins, -1), axis=2).ravel()
+    if exclude is not None:
+        med[exclude[:, :n].reshape(v.shape[0], bins, -1).any(axis=2).ravel()] = np.nan
     x = np.mean(cols[:, :n].reshape(v.shape[0], bins, -1), axis=2).ravel()
     y = np.repeat(np.asarray(rows, float), bins)
     a = np.column_stack((np.ones_like(x), x, y))
@@ -1010,41 +1015,40 @@ class SilhouetteTracer:
     def _light_change(self, crop, rows, moved, light):
         """How much brighter this frame's light is than the first frame's over the walls' ``crop`` (view ``rows``
         and ``moved`` columns of the first frame: the crop's less the drift to the pixel; ``light``: the first
-        frame's there), to be added to it: the plane ``a0 + a1 col + a2 row`` of this frame less the first, fitted
-        with a multiple of the first frame's departure from its light beside it (least squares over every
-        ``_LIGHT_ROWS``-th row, again without the pixels more than 3 scaled MADs off the first fit: the residue of
-        the drift's fraction of a px at the walls' edges).
+        frame's there), to be added to it: ``s + (L - 1) light``, with ``s`` and ``L - 1`` planes in the crop
+        fitted to this frame less the first, ``s + (L - 1) flat`` (least squares over every ``_LIGHT_ROWS``-th
+        row, again without the pixels more than 3 scaled MADs off the first fit: the residue of the drift's
+        fraction of a px at the walls' edges, and the walls' own widening).
 
-        Stray light (a window, the room's lamps) adds to the light the walls'
-        half level is read against, a lamp brighter or dimmer scales it (and
-        the gain step, a frame divided by its light's ratio, turns the one
-        into the other): this frame less the first is then ``s + (L - 1)
-        flat``, a smooth part (``s + (L - 1) light``, the plane) and a multiple
-        of the first frame's walls (``(L - 1) (flat - light)``, whose factor is
-        not needed: fitted, not returned, so a crop without much of a wall in it
-        leaves the plane as well determined).  Measured with stray light growing
-        to 20 % of full scale on one side of the halo look: against the first
+        Stray light (a window, the room's lamps) adds ``s`` to the light the
+        walls' half level is read against, a lamp brighter on one side scales
+        it by ``L`` (and the gain step, a frame divided by its light's ratio,
+        turns the one into the other).  Measured with stray light growing to
+        20 % of full scale on one side of the halo look: against the first
         frame's light the walls' zones were taken 6-10 px off and frames lost
         (``wall_rms``).
         """
         sub = slice(None, None, _LIGHT_ROWS)
         flat = np.rot90(self._flat, self.k)[np.ix_(rows[sub], moved)].astype(float)
         diff = (crop[sub] - flat).ravel()
-        x, y = moved - moved.mean(), rows - rows.mean()
-        a = np.empty((diff.size, 4))
+        level = max(float(np.mean(light)), 1e-9)
+        x = (moved - moved.mean()) / max(np.ptp(moved), 1)  # (scaled: the normal equations well conditioned)
+        y = (rows - rows.mean()) / max(np.ptp(rows), 1)
+        a = np.empty((diff.size, 6))
         a[:, 0], a[:, 1], a[:, 2] = 1.0, np.tile(x, flat.shape[0]), np.repeat(y[sub], x.size)
-        a[:, 3] = (flat - light[sub]).ravel()
+        a[:, 3:] = a[:, :3] * (flat.ravel() / level)[:, None]
         keep = np.isfinite(diff)
         for last in (False, True):
-            ak = a[keep]  # (the normal equations of 4 unknowns)
+            ak = a[keep]  # (the normal equations of 6 unknowns)
             try:
                 c = np.linalg.solve(ak.T @ ak, ak.T @ diff[keep])
-            except np.linalg.LinAlgError:  # (no wall in the crop: the factor is not determined, the plane is)
+            except np.linalg.LinAlgError:  # (a crop of one grey: s and L - 1 not told apart, their sum is)
                 c = np.linalg.lstsq(ak.T @ ak, ak.T @ diff[keep], rcond=None)[0]
             if not last:
                 r = diff - a @ c
                 keep &= np.abs(r) <= 3.0 * max(_mad(r[keep]), 1e-9)
-        return c[0] + c[1] * x[None, :] + c[2] * y[:, None]
+        x, y = x[None, :], y[:, None]
+        return c[0] + c[1] * x + c[2] * y + (c[3] + c[4] * x + c[5] * y) * light / level
 
     def process(self, frame, index=0, *, guide=None, manual=None):
         """Measure one frame (``guide`` is not needed by this route and ignored); returns a FrameTrace."""
@@ -1395,7 +1399,7 @@ class SilhouetteTracer:
             return max(min(_mad(v), _NOISE_TOP_FACTOR * _mad(top)), 1e-4)
 
         at = cols[None, :] + starts[:, None]
-        raw, plane = noise(v), _light_plane(v, at, rows)
+        raw, plane = noise(v), _light_plane(v, at, rows, exclude=self._near_last_dome(w, rows, at))
         if plane is None:
             return raw, None, 0.0
         tilt = float(abs(plane[1]) * self.view_shape[1] + abs(plane[2]) * self.view_shape[0])
@@ -1404,6 +1408,24 @@ class SilhouetteTracer:
         grid = plane[0] + plane[1] * at + plane[2] * rows[:, None]
         flat = noise((v - grid) / (1.0 + grid))
         return (flat, plane, tilt) if raw > _TILT_NOISE * flat else (raw, None, tilt)
+
+    def _near_last_dome(self, w, rows, cols):
+        """Which of the samples at view ``rows`` (one a row of ``cols``) lie within ``_DOME_ZONE_PX`` of the last ok
+        frame's dome, columns and height (None before a dome was read): the light's plane is fitted without
+        them (measured on absorbing_band, whose dyed film is a dark band along the dome, long over its top: with
+        them, the plane through the water's change of frames in unchanged light read a tilt of 0.15-0.26 from
+        Vtilde 1 on, and with the light's gradient drifting by 0.25 across the rows 0.92 for 0.62, its last frames
+        8-11x off)."""
+        if self.prev is None or self.prev.u is None or not np.size(self.prev.u):
+            return None
+        u, z = np.asarray(self.prev.u, float), np.asarray(self.prev.z, float)
+        out = np.zeros(cols.shape, bool)
+        for i, r in enumerate(rows):
+            high = z >= w.top_row - r - _DOME_ZONE_PX
+            if high.any():
+                out[i] = ((cols[i] >= w.axis_col + u[high].min() - _DOME_ZONE_PX)
+                          & (cols[i] <= w.axis_col + u[high].max() + _DOME_ZONE_PX))
+        return out
 
     def _rays(self, sample, w):
         phis = np.linspace(_RAY_MIN, np.pi - _RAY_MIN, _N_RAYS)
