@@ -1096,12 +1096,13 @@ class SilhouetteTracer:
 
         def sample(points, directions, offsets, own=True):
             v = self._change(frame, points, directions, offsets, dx, dy)
+            if tilt is None and not (own and self.bounds is not None):
+                return v
+            cols = points[:, :1] + offsets[None, :] * directions[:, :1]  # (the samples' view columns)
             if tilt is not None:  # (divided out: (frame - L flat) / (L light), L - 1 the plane, flat ~ light)
-                p = (tilt[0] + tilt[1] * (points[:, :1] + offsets[None, :] * directions[:, :1])
-                     + tilt[2] * (points[:, 1:] + offsets[None, :] * directions[:, 1:]))
+                p = tilt[0] + tilt[1] * cols + tilt[2] * (points[:, 1:] + offsets[None, :] * directions[:, 1:])
                 v = (v - p) / (1.0 + p)
             if own and self.bounds is not None:  # (this chamber's columns only: no neighbour's dome)
-                cols = points[:, :1] + offsets[None, :] * directions[:, :1]
                 if self._lim is None:
                     v[(cols < self.bounds[0] + dx) | (cols > self.bounds[1] + dx)] = 0.0
                 else:  # (each row's own limits, :meth:`_neighbour_gap`)

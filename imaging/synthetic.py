@@ -625,14 +625,21 @@ class _Scene:
         )
 
 
-def _stray(shape, nuis: Nuisances, amount):
-    """Additive stray light (float32): ``amount`` at the field's side ``illumination_angle`` points to, none at the
-    other, linear between."""
+def _field_coords(shape, angle):
+    """Each pixel's position from the field's centre (float32, -1 .. 1 at its sides: ``x`` to the right, ``y`` up)
+    and along ``angle`` (deg, from ``x`` towards ``y``)."""
     rows, cols = shape
     y, x = np.mgrid[0:rows, 0:cols].astype(np.float32)
     xc, yc = (x - (cols - 1) / 2) / (cols / 2), ((rows - 1) / 2 - y) / (rows / 2)
-    th = math.radians(nuis.illumination_angle)
-    return (0.5 * amount * (1.0 + xc * math.cos(th) + yc * math.sin(th))).astype(np.float32)
+    th = math.radians(angle)
+    return xc, yc, xc * math.cos(th) + yc * math.sin(th)
+
+
+def _stray(shape, nuis: Nuisances, amount):
+    """Additive stray light (float32): ``amount`` at the field's side ``illumination_angle`` points to, none at the
+    other, linear between."""
+    along = _field_coords(shape, nuis.illumination_angle)[2]
+    return (0.5 * amount * (1.0 + along)).astype(np.float32)
 
 
 def _illumination(shape, nuis: Nuisances, gradient=None):
@@ -641,11 +648,8 @@ def _illumination(shape, nuis: Nuisances, gradient=None):
     gradient = nuis.illumination_gradient if gradient is None else gradient
     if gradient == 0 and nuis.vignetting == 0:
         return None
-    rows, cols = shape
-    y, x = np.mgrid[0:rows, 0:cols].astype(np.float32)
-    xc, yc = (x - (cols - 1) / 2) / (cols / 2), ((rows - 1) / 2 - y) / (rows / 2)
-    th = math.radians(nuis.illumination_angle)
-    field_ = 1.0 + gradient * (xc * math.cos(th) + yc * math.sin(th))
+    xc, yc, along = _field_coords(shape, nuis.illumination_angle)
+    field_ = 1.0 + gradient * along
     field_ *= 1.0 - nuis.vignetting * (xc**2 + yc**2) / 2.0
     return field_.astype(np.float32)
 
@@ -1095,13 +1099,11 @@ def render_series(
             passing, where = _dust((rows, cols), nuis, rng_debris, nuis.debris, nuis.debris_radius)
             shade = passing if dust is None else dust * passing
             debris.append(np.column_stack((np.full(len(where), i), where)))
+        frac = (times[i] - times[0]) / (times[-1] - times[0]) if times[-1] != times[0] else 0.0  # (of the series)
         light = illum
-        if nuis.light_drift != 0.0 and times[-1] != times[0]:  # (the light's gradient drifting over the series)
-            light = _illumination((rows, cols), nuis, nuis.illumination_gradient
-                                  + nuis.light_drift * (times[i] - times[0]) / (times[-1] - times[0]))
-        stray = None
-        if nuis.stray_light != 0.0 and times[-1] != times[0] and i > 0:  # (stray light growing over the series)
-            stray = _stray((rows, cols), nuis, nuis.stray_light * (times[i] - times[0]) / (times[-1] - times[0]))
+        if nuis.light_drift != 0.0 and frac:  # (the light's gradient drifting over the series)
+            light = _illumination((rows, cols), nuis, nuis.illumination_gradient + nuis.light_drift * frac)
+        stray = _stray((rows, cols), nuis, nuis.stray_light * frac) if nuis.stray_light != 0.0 and frac else None
         frames[i] = _finish(img, nuis, light, shade, rng_noise, float(gains[i]), stray)
         if nuis.time_stamp != "none":
             frames[i] = _stamp(frames[i], times[i] - times[0], nuis.time_stamp, p, nuis.bit_depth)
