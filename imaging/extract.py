@@ -49,6 +49,9 @@ _FIGURES = {
                           "(1: a circle; 0: a straight stretch, as a cap torn off leaves)"),
     "light_gain": ("1", "silhouette route: the base's mean light over the first frame's (the lamp, the exposure; "
                         "a frame more than 5 % off is divided by it before it is read)"),
+    "clipped": ("m", "band route: how far the walls move (the larger) when the pixels at the camera's clip level "
+                     "(its full scale, held by 3 or more of them) are read 1.25x brighter: the rim's dependence on "
+                     "light the frame did not record (0: no clipped pixel at the walls)"),
     "light_tilt": ("1", "silhouette route: how much the light changed across the view since the first frame (the "
                         "range of a plane through the water's change; divided out of a frame whose noise it raised "
                         "by over 25 %)"),
@@ -778,6 +781,7 @@ def _store(i, res, run, frame, p):
     for k in _FIGURES:  # (the tracers' quality figures)
         v = res.figures.get(k, np.nan)
         scal[k][i] = v if np.isfinite(v) else (np.inf if v == np.inf else np.nan)
+    scal["clipped"][i] *= p  # (px -> m; inf stays)
     if g is None:
         return
     view = FrameView(frame, run.tracer.k)

@@ -62,6 +62,7 @@ from osmobulge.imaging._chamber import (
     measure_walls,
     smoothed_coarse,
 )
+from osmobulge.imaging._clipping import MOVED_FLAG, clip_mask, clip_message, raised, wall_clipping
 from osmobulge.imaging._kernels import (
     abs_percentile,
     block_mean,
@@ -1031,6 +1032,8 @@ class ChamberTracer:
         checks = [
             ("no_membrane", "dome_contrast", fig["dome_contrast"] < st.min_contrast),
             ("poor_fit", "field_margin", fig.get("field_margin", np.inf) < FIELD_MARGIN_PX),
+            # (the rim read in light the camera clipped)
+            ("poor_fit", "clipped", fig.get("clipped", 0.0) > MOVED_FLAG),
             ("delaminated", "rim_contact", fig["rim_contact"] < st.delamination_flag),
             ("fractured", "gap_length", fig["gap_length"] > st.gap_flag),
             ("touching", "neighbour_gap", fig["neighbour_gap"] < st.touching_flag),
@@ -1073,6 +1076,7 @@ class ChamberTracer:
         self._drift = np.array([g.line.x0 - self.ref.line.x0, g.line.y0 - self.ref.line.y0])
         out.drift = (float(self._drift[0]), float(self._drift[1]))
         out.geometry = g
+        clipped = out.figures["clipped"] = self._clip_shift(view, g)
         if manual is not None:
             return self._from_points(view, g, out, manual)
         guide_uz = None
@@ -1088,13 +1092,13 @@ class ChamberTracer:
             self._finish(view, g, out, tr)
             if tr["mode"] == "track" and out.flag != "ok":
                 # a tracked frame failing a check is traced again as without tracking (an event, a lost track)
-                out = FrameTrace(index=index, geometry=g, drift=out.drift)
+                out = FrameTrace(index=index, geometry=g, drift=out.drift, figures={"clipped": clipped})
                 tr = self.trace_dome(view, g, guide_uz, track=False)
                 if tr is not None:
                     self._finish(view, g, out, tr)
         if tr is None:
             out.message = "no dome traced"
-            out.figures = {"dome_contrast": 0.0, "well_membrane": self._well_membrane(view, g)}
+            out.figures = {"dome_contrast": 0.0, "well_membrane": self._well_membrane(view, g), "clipped": clipped}
             last, margin = self._edge_reached
             if margin < FIELD_MARGIN_PX:  # (a dome does not shrink: it grew on out of the field)
                 out.message = f"no dome traced: {field_edge_message(margin, last)}"
@@ -1106,6 +1110,8 @@ class ChamberTracer:
             else:
                 out.flag, out.flag_figure, out.flag_value = "no_membrane", "dome_contrast", 0.0
             return out
+        if out.flag_figure == "clipped":
+            out.message = clip_message(out.flag_value)
         if out.flag == "ok":
             self._prev2, self.prev = self.prev, out
             # the first pass's offsets from the predicted dome are the prediction error (after a global
@@ -1115,6 +1121,21 @@ class ChamberTracer:
             self._band = float(abs_percentile(wd, tr["use"] & np.isfinite(wd), 90.0))  # nan when none
             self._tracking = True
         return out
+
+    def _clip_shift(self, view, g):
+        """How far the walls move (px, the larger) when the frame's pixels at the camera's clip level are read
+        :data:`~osmobulge.imaging._clipping.BRIGHTER`: 0 when none is where the walls are read, inf when the
+        walls are not found then.  Their light is a bound: a wall's level read from it is too low by an amount
+        the frame does not tell (measured: painted_band with its light 1.6x, rim 1.1 px off)."""
+        if not wall_clipping(view, g) > 0.0:
+            return 0.0
+        mask = clip_mask(view.frame)
+        if mask is None:
+            return 0.0
+        well, _ = self._walls(FrameView(raised(view.frame, mask), view.k), g.line, g.well)
+        if well is None:
+            return np.inf
+        return float(max(abs(well.u_left - g.well.u_left), abs(well.u_right - g.well.u_right)))
 
     def _finish(self, view, g, out, tr):
         """Measures, quality figures and flag of a traced dome, into ``out``."""

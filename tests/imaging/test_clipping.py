@@ -1,0 +1,103 @@
+"""Light the camera clipped (imaging._clipping): which pixels are at its full scale, and the band route's gate."""
+
+import numpy as np
+import pytest
+
+from osmobulge.imaging._chamber import FrameView
+from osmobulge.imaging._clipping import MOVED_FLAG, clip_mask, clipped_share, raised, wall_clipping
+from osmobulge.imaging.extract import extract
+from osmobulge.imaging.looks import render_look, score
+from osmobulge.modeling import PreStretch
+from osmobulge.modeling.transport import Chamber
+
+PRE = PreStretch(0.01, 0.0)
+
+
+@pytest.mark.parametrize("dtype, full", [(np.uint8, 255), (np.uint16, 4095), (np.uint16, 65535), (np.uint16, 1023),
+                                         (np.float32, 1.0)])
+def test_a_clip_is_a_full_scale_held_by_several_pixels(dtype, full):
+    """Light drawn above a camera's full scale and cut there: the clipped pixels are exactly those the light
+    put over it, whatever the file's dtype holds (12-bit data in a 16-bit file clips at 4095)."""
+    rng = np.random.default_rng(3)
+    light = rng.normal(0.9 * full, 0.1 * full, 5000)
+    over = light >= full
+    stored = np.clip(light if dtype == np.float32 else np.rint(light), 0, full).astype(dtype)
+    mask = clip_mask(stored)
+    assert over.sum() > 100
+    np.testing.assert_array_equal(mask, stored == full)
+    assert np.count_nonzero(mask ^ over) <= np.count_nonzero(np.rint(light) == full)  # (rounding onto it)
+    assert clipped_share(stored) == pytest.approx(mask.mean())
+
+
+def test_no_clip_below_full_scale_or_at_one_or_two_pixels():
+    rng = np.random.default_rng(4)
+    dim = np.rint(rng.normal(3000, 100, 5000)).astype(np.uint16)  # (16-bit, nowhere near a full scale)
+    assert clip_mask(dim) is None and clipped_share(dim) == 0.0
+    plateau = np.full(100, 4000, np.uint16)  # (a flat top that is not a full scale: noise-free data, not a clip)
+    assert clip_mask(plateau) is None
+    two = np.r_[dim, 4095, 4095].astype(np.uint16)  # (the brightest two of a smooth distribution)
+    assert clip_mask(two) is None
+    three = np.r_[dim, 4095, 4095, 4095].astype(np.uint16)
+    assert np.count_nonzero(clip_mask(three)) == 3
+    assert clip_mask(np.array([], np.uint16)) is None
+
+
+def test_raised_brightens_only_the_masked_pixels_in_a_copy():
+    v = np.array([[1, 255], [255, 7]], np.uint8)
+    out = raised(v, v == 255, 1.25)
+    np.testing.assert_array_equal(out, [[1.0, 318.75], [318.75, 7.0]])
+    assert out.dtype == np.float32 and v[0, 1] == 255
+
+
+def _painted(light_factor):
+    """painted_band (the band route: the well's liquid as light as the water, 0.8 of full scale, over a grey
+    base), its later frames' light times ``light_factor`` and cut at the 16-bit full scale."""
+    s = render_look("painted_band", [0.0, 0.6, 1.5], shape=(700, 900), lambda_pre=PRE)
+    frames = np.asarray(s.frames).astype(float)
+    frames[1:] *= light_factor
+    frames = np.clip(np.rint(frames), 0, 65535).astype(np.uint16)
+    p = s.truth.attrs["pixel_size"]
+    a, h, l0 = (s.truth.attrs[k] for k in ("chamber_radius", "chamber_depth", "membrane_thickness"))
+    ds = extract(frames, pixel_size=p, chamber=Chamber(a, h, l0, 3000.0), progress=False, frame_interval=600.0)
+    return s, frames, ds
+
+
+def test_the_band_routes_walls_read_in_clipped_light_are_flagged():
+    """painted_band's light 1.6x from its second frame: the well's liquid clips (0.8 -> 1.28 of full scale) and
+    its walls' steps are read against the full scale.  Those frames' rims read 1.1-1.2 px off (measured on the
+    9-frame series; here asserted over 0.5 px, issue 16's tolerance), so each is flagged ``clipped`` with the
+    walls' move when read 1.25x brighter (0.5-0.6 px measured; asserted over MOVED_FLAG).  The first frame,
+    not clipped, reads ok with the figure 0; the same series unchanged has no clipped frame."""
+    s, frames, ds = _painted(1.6)
+    assert ds.attrs["tracer"] == "band"
+    sc = score(s.truth, ds)
+    p = s.truth.attrs["pixel_size"]
+    assert clipped_share(frames[1]) > 0.5  # (the water and the well: most of the frame)
+    assert list(ds.flag.values) == ["ok", "poor_fit", "poor_fit"]
+    assert list(ds.flag_figure.values) == ["", "clipped", "clipped"]
+    assert np.all(ds.clipped.values[1:] / p > MOVED_FLAG) and ds.clipped.values[0] == 0.0
+    assert "clipped" in str(ds.message.values[1]) and "exposure" in str(ds.message.values[1])
+    assert np.all(np.abs(sc["rim_bias_px"][1:]) > 0.5)  # (what the flag stands for: the rims are wrong)
+    assert sc["n_silent"] == 0
+    # the volumes are not what the clip spoils: within their tolerance
+    assert np.all(sc["dv_tol"] <= 1.0)
+    s0, _, ds0 = _painted(1.0)
+    assert list(ds0.flag.values) == ["ok"] * 3 and np.all(ds0.clipped.values == 0.0)
+
+
+def test_wall_clipping_reads_the_clipped_side_of_each_wall():
+    """The band route's geometry of painted_band: its well's liquid cut at a level below it (the frame clipped
+    there, its light scaled so that level is the full scale) makes the wells' side all clipped (share 1), the
+    grey base's side none; the frame as rendered has none."""
+    from osmobulge.imaging.trace import ChamberTracer
+
+    s = render_look("painted_band", [0.0], shape=(700, 900))
+    frame = np.asarray(s.frames[0]).astype(float)
+    tr = ChamberTracer(frame.astype(np.uint16))
+    g = tr.ref
+    assert wall_clipping(FrameView(frame.astype(np.uint16), tr.k), g) == 0.0
+    x, y = g.line.point(0.0, -0.5 * g.thickness - 0.5 * g.well.depth)  # (the well's middle, view = stored: k 0)
+    well_level = np.median(frame[int(y) - 5 : int(y) + 6, int(x) - 20 : int(x) + 21])
+    assert tr.k == 0 and well_level > np.median(frame[int(y), : int(x - g.rim_radius) - 20])  # (lighter than the base)
+    cut = np.clip(np.rint(frame * 65535.0 / (0.97 * well_level)), 0, 65535).astype(np.uint16)
+    assert wall_clipping(FrameView(cut, tr.k), g) > 0.9
