@@ -14,11 +14,11 @@ tells a frame whose walls are read in clipped light; the band route then reads
 them again with the clipped pixels :data:`BRIGHTER` and flags the frame
 ``clipped`` when they move more than :data:`MOVED_FLAG` px.
 
-The silhouette route has no such gate: the same probe moves its walls
-0.2-0.5 px on frames that read right (the outside light clipped, the rim
-within 0.4 px) and 0.2-0.35 px on frames that read 0.6-0.9 px off (inverted's
-clipped bright wall lines), so the move does not tell them apart (docs, issue
-16's notes).
+The silhouette route reads the walls of a frame with more clipped light than
+its first frame by matching the first frame's profile across them over the
+pixels recorded (``SilhouetteTracer._shifted_walls``, which uses
+:func:`clip_mask`): the re-read above does not tell its right frames from its
+wrong ones there (it moves both 0.2-0.5 px).
 
 Only the top is a clip: a dark pixel at 0 is light near none, which a level
 read from it does not miss by more than the noise.

@@ -60,6 +60,7 @@ from numba import njit
 from scipy import ndimage
 
 from osmobulge.imaging._chamber import ROTATIONS, ChamberGeometry, ChamberNotFound, FrameView, Line, Well
+from osmobulge.imaging._clipping import clip_mask
 from osmobulge.imaging._kernels import (
     change_transects,
     longest_run,
@@ -70,7 +71,7 @@ from osmobulge.imaging._kernels import (
     running_percentile,
     upsample_linear,
 )
-from osmobulge.imaging._silhouette import FlatMaps, find_walls, neighbour_walls
+from osmobulge.imaging._silhouette import MAX_WALL_RMS, FlatMaps, SilhouetteWalls, find_walls, neighbour_walls
 from osmobulge.imaging.geometry import revolution_measures, smooth_profile
 from osmobulge.imaging.trace import (
     FIELD_MARGIN_PX,
@@ -195,6 +196,18 @@ _DOME_ZONE_PX = 40.0
 #: the light's change over the walls' crop is fitted on every _LIGHT_ROWS-th row of it
 #: (:meth:`SilhouetteTracer._light_change`)
 _LIGHT_ROWS = 4
+
+#: walls read in light the camera clipped (:meth:`SilhouetteTracer._shifted_walls`): the first frame's columns
+#: either side of each wall compared (px), the shifts tried (px, coarse then fine steps) and the rows of a band
+_SHIFT_HALF = 20
+_SHIFT_RANGE = 4.0
+_SHIFT_STEPS = (0.25, 0.01)
+_SHIFT_BAND = 10
+_SHIFT_SEEN = 0.1  # (the least share of a band's pixels recorded, not clipped, to read it)
+#: a frame's walls are read that way when their crop has more than this many times the first frame's clipped pixels
+#: (plus 3): inverted's wall lines, clipped in the first frame, clip 720-770 px of the 789 of the first in frames
+#: in the same light, and 1980-2010 with the light 1.05x
+_CLIP_GROWTH = 1.1
 #: the film beyond each foot checked for a lift (:meth:`SilhouetteTracer._rim_contact`): ``_LIFT_SPAN`` film
 #: thicknesses (at least ``_LIFT_MIN_PX``) from ``_LIFT_GAP`` px past the foot, against the change ``_LIFT_FAR``
 #: radii out from the rim
@@ -770,6 +783,42 @@ class _Polyline:
         return self.dirs[np.clip(i, 0, len(self.dirs) - 1)]
 
 
+def _shift_misfits(f, seen, y, flat, bad, cols, shifts):
+    """:meth:`SilhouetteTracer._shifted_walls`' misfit of one band at each of ``shifts``: the mean square
+    residual (over the pixels fitted, less the 4 unknowns) of ``f = a + b y + (c + d y) flat(cols - shift)``
+    fitted by least squares over the pixels ``seen`` (not clipped here) whose two ``flat`` neighbours are not
+    ``bad`` (clipped in the first frame); inf where under ``_SHIFT_SEEN`` of the band's pixels are left.
+
+    ``f``, ``seen``, ``y``: the band (rows x len(cols)); ``flat``, ``bad``: the
+    first frame's rows of the band, every column; ``flat`` linearly
+    interpolated.  All the shifts at once (the normal equations of each).
+    """
+    x = cols[None, :] - np.asarray(shifts)[:, None]  # (shift, column)
+    i = np.floor(x).astype(int)
+    t = (x - i)[:, None, :]
+    ts = flat[:, i].transpose(1, 0, 2) * (1.0 - t) + flat[:, i + 1].transpose(1, 0, 2) * t  # (shift, row, column)
+    w = (seen[None] & ~(bad[:, i] | bad[:, i + 1]).transpose(1, 0, 2)).astype(float)
+    n = w.sum(axis=(1, 2))
+    basis = (np.ones_like(ts), np.broadcast_to(y, ts.shape), ts, y * ts)
+    ata = np.empty((len(shifts), 4, 4))
+    atf = np.empty((len(shifts), 4))
+    for a in range(4):
+        wa = w * basis[a]
+        atf[:, a] = np.einsum("srk,rk->s", wa, f)
+        for b in range(a, 4):
+            ata[:, a, b] = ata[:, b, a] = np.einsum("srk,srk->s", wa, basis[b])
+    ftf = np.einsum("srk,rk->s", w, f * f)
+    out = np.full(len(shifts), np.inf)
+    ok = n >= max(_SHIFT_SEEN * f.size, 5)
+    if np.any(ok):
+        scale = np.sqrt(np.einsum("sii->si", ata[ok])) + 1e-30  # (the normal equations scaled: well conditioned)
+        a_s = ata[ok] / scale[:, :, None] / scale[:, None, :]
+        c = np.linalg.solve(a_s, (atf[ok] / scale)[..., None])[..., 0]
+        rss = ftf[ok] - np.einsum("si,si->s", c, atf[ok] / scale)
+        out[ok] = np.maximum(rss, 0.0) / (n[ok] - 4)
+    return out
+
+
 class SilhouetteTracer:
     """Follows one chamber seen by its silhouettes through a series (see the module's notes).
 
@@ -881,6 +930,9 @@ class SilhouetteTracer:
         self.ref = self._geometry(w)
         self.blur = np.nan
         self._flat = native_frame(frame)  # (stored orientation: sampled in the view by quarter turn k)
+        # (its pixels the camera clipped, in the view; None when none is: :meth:`_walls`)
+        clip0 = clip_mask(self._flat)
+        self._clip0 = None if clip0 is None else np.rot90(clip0, self.k)
         self._bg = np.ascontiguousarray(light, np.float32)  # (in the view)
         self.view_shape = img.shape
         # the base below the film (walls, well bottom), registered frame to frame; no dome there
@@ -975,9 +1027,11 @@ class SilhouetteTracer:
                                wall_rms=float(w.rms))
 
     # ---------------------------------------------------------------------- one frame
-    def _walls(self, img, rows_p, cols_p):
-        """This frame's walls and its drift (dx, dy) from the first frame (``rows_p``, ``cols_p``: its base's
-        :func:`_profiles`)."""
+    def _walls(self, img, rows_p, cols_p, raw=None):
+        """This frame's walls, its drift (dx, dy) from the first frame (``rows_p``, ``cols_p``: its base's
+        :func:`_profiles`) and the share of the walls' pixels the camera clipped (0 unless it clipped light the
+        first frame's was not: then :meth:`_shifted_walls` reads them; ``raw``: the view as recorded, ``img``
+        before its light's gain was divided out)."""
         # the drift: the base's row and column profiles (its mean over columns and over rows; the well's bottom
         # face and the walls) registered against the first frame's, each by phase correlation
         dy, dx = -self._reg_ref[0].shift(rows_p), -self._reg_ref[1].shift(cols_p)
@@ -1005,12 +1059,108 @@ class SilhouetteTracer:
         moved = np.clip(cols - int(round(dx)), 0, img.shape[1] - 1)
         crop = np.concatenate([img[lo:hi, a:b] for a, b in spans], axis=1)
         c0, c1 = spans[0][0], spans[-1][0] - (width0 if len(spans) == 2 else 0)  # (crop column -> view column)
+        # more of the walls' light clipped than in the first frame (the same share, its clipped wall lines moved
+        # with the walls, reads as the first frame did: measured on inverted, within 0.05 px)
+        clip = None if raw is None else clip_mask(np.concatenate([raw[lo:hi, a:b] for a, b in spans], axis=1))
+        clip0 = None if clip is None or self._clip0 is None else self._clip0[np.ix_(rows, moved)]
+        n0 = 0 if clip0 is None else np.count_nonzero(clip0)
+        if clip is not None and np.count_nonzero(clip) > _CLIP_GROWTH * n0 + 3:
+            flat = np.rot90(self._flat, self.k)[np.ix_(rows, moved)].astype(float)
+            at = (w0.left + int(round(dx)) - c0, w0.right + int(round(dx)) - c1)  # (the first frame's, crop columns)
+            near = at
+            if self.prev is not None and self.prev.geometry is not None:  # (the last ok frame's, this drift)
+                g, mx = self.prev.geometry, dx - self.prev.drift[0]
+                near = (g.line.x0 - g.rim_radius + mx - c0, g.line.x0 + g.rim_radius + mx - c1)
+            w, share = self._shifted_walls(np.asarray(crop, float), flat, clip, clip0, top - lo, at, near)
+            return replace(w, top_row=w.top_row + lo, base_row=w.base_row + lo, left=w.left + c0,
+                           right=w.right + c1), dx, dy, share
         light = self._bg[np.ix_(rows, moved)]
         light = light + self._light_change(crop, rows, moved, light)
         w = find_walls(crop, self.l0, depth_px=self.depth, top_row=top - lo, strip=_STRIP,
                        near=(left - c0, right - c1), light=light)
         return replace(w, top_row=w.top_row + lo, base_row=w.base_row + lo, left=w.left + c0,
-                       right=w.right + c1), dx, dy
+                       right=w.right + c1), dx, dy, 0.0
+
+    def _shifted_walls(self, crop, flat, clip, clip0, top, at, near):
+        """The walls of a frame with more light clipped than the first frame (:data:`_CLIP_GROWTH`), read by
+        matching the first frame's profile across each wall over the pixels this frame recorded; and the larger
+        share, over the two walls, of the pixels within 3 px of a wall left out as clipped.
+
+        ``crop``: this frame's walls' crop; ``flat``: the first frame's, the
+        drift to the pixel taken off; ``clip``, ``clip0``: their pixels the
+        camera clipped (``clip0`` None when the first frame has none);
+        ``top``: the top face's row; ``at``: the first frame's walls' crop
+        columns; ``near``: this frame's expected (the last ok frame's).
+
+        A clipped pixel's light is a bound: the walls' half level read from
+        it is too low and their edges move (measured: the inverted look, its
+        light 1.6x, read 0.6 px off, ok; the same frames unclipped, within
+        0.01 px; here within 0.13 px, or not found).  Per band of
+        ``_SHIFT_BAND`` rows of the walls' strip, and each column
+        ``_SHIFT_HALF`` px either side of the wall: this frame ``= a + b y + (c
+        + d y) flat(x - shift)`` (the light's change, linear down the band;
+        ``flat`` linearly interpolated) by least squares over the pixels
+        clipped neither here nor, shifted, in the first frame
+        (:func:`_shift_misfits`), for shifts within ``_SHIFT_RANGE`` px (steps
+        of 0.25, then 0.01 px about the best), the first band's from the
+        expected wall, each next band's from the last band's (the walls lean
+        more as the pre-stretch grows: on edge_dark at Vtilde 4 a wall's top
+        is 8.6 px out of the first frame's, its foot 2.3 px).  The bands'
+        walls are fitted by a line down the strip and read at the base's top
+        surface; their RMS about it is the walls' ``rms`` (over
+        ``MAX_WALL_RMS``: not found, as :func:`find_walls`).
+        """
+        base = top + self.l0
+        r0 = max(int(base + _STRIP[0] * self.depth), 0)
+        r1 = min(int(base + _STRIP[1] * self.depth), crop.shape[0])
+        half, reach = _SHIFT_HALF, int(np.ceil(_SHIFT_RANGE)) + 1
+        off = np.arange(-half, half + 1)
+        coarse = np.arange(-_SHIFT_RANGE, _SHIFT_RANGE + 1e-9, _SHIFT_STEPS[0])
+        bad_t = np.zeros(flat.shape, bool) if clip0 is None else clip0
+        cols, rms, shares = [], [], []
+        for j0, jn in zip(at, near, strict=True):
+            t_win = int(round(j0)) + off
+            if t_win[0] - reach < 0 or t_win[-1] + reach >= crop.shape[1]:
+                raise ChamberNotFound("a wall lies too near the crop's edge to be read in clipped light")
+            moved = int(round(jn)) - t_win[half]  # (whole px from the first frame's wall to the expected: from
+            # the top band on, each band's search starts from the last band's wall, so a wall leaning more than it
+            # did in the first frame is followed down)
+            ys, ws, near_clip = [], [], []
+            for b0 in range(r0, r1 - _SHIFT_BAND // 2, _SHIFT_BAND):
+                b1 = min(b0 + _SHIFT_BAND, r1)
+                f_win = t_win + moved
+                if f_win[0] < 0 or f_win[-1] >= crop.shape[1]:
+                    break
+                near_clip.append((clip[b0:b1, f_win] | bad_t[b0:b1, t_win])[:, np.abs(off) <= 3])
+                f = crop[b0:b1, f_win]
+                seen = ~clip[b0:b1, f_win]
+                if np.count_nonzero(seen) < _SHIFT_SEEN * seen.size:
+                    continue
+                y = np.broadcast_to((np.arange(b0, b1) - 0.5 * (b0 + b1 - 1))[:, None], f.shape)
+                e = _shift_misfits(f, seen, y, flat[b0:b1], bad_t[b0:b1], t_win, coarse)
+                k = int(np.argmin(e))
+                fine = np.arange(coarse[k] - _SHIFT_STEPS[0], coarse[k] + _SHIFT_STEPS[0] + 1e-9, _SHIFT_STEPS[1])
+                fine = fine[np.abs(fine) <= _SHIFT_RANGE]
+                e = _shift_misfits(f, seen, y, flat[b0:b1], bad_t[b0:b1], t_win, fine)
+                k = int(np.argmin(e))
+                if not np.isfinite(e[k]):
+                    continue
+                d = fine[k] + (_vertex(e[k - 1], e[k], e[k + 1]) * _SHIFT_STEPS[1] if 0 < k < e.size - 1 else 0.0)
+                ys.append(0.5 * (b0 + b1 - 1))
+                ws.append(j0 + moved + d)
+                moved += int(round(d))
+            shares.append(float(np.mean(np.concatenate(near_clip))) if near_clip else 1.0)
+            if len(ws) < 3:
+                raise ChamberNotFound("a wall's profile is clipped over most of its rows: its edge is not seen "
+                                      "in the light the camera recorded (lower the exposure)")
+            fit = np.polyfit(ys, ws, 1)
+            cols.append(float(np.polyval(fit, base)))
+            rms.append(float(np.std(np.asarray(ws) - np.polyval(fit, ys))))
+        if max(rms) > MAX_WALL_RMS:  # (as find_walls: not straight walls)
+            raise ChamberNotFound(f"the walls read in light the camera clipped are not straight lines (row "
+                                  f"scatter {max(rms):.2f} px > {MAX_WALL_RMS} px): too little of their profile "
+                                  f"was recorded (lower the exposure)")
+        return SilhouetteWalls(float(top), float(base), cols[0], cols[1], max(rms)), max(shares)
 
     def _light_change(self, crop, rows, moved, light):
         """How much brighter this frame's light is than the first frame's over the walls' ``crop`` (view ``rows``
@@ -1072,7 +1222,7 @@ class SilhouetteTracer:
         if frame.shape != self.shape:
             raise ValueError(f"frame {index} has shape {frame.shape}, expected {self.shape}")
         frame = native_frame(frame)  # (no copy when it is already the kernels' kind)
-        img = np.rot90(frame, self.k)  # (a view: only the crops the walls are read on are copied)
+        img = raw = np.rot90(frame, self.k)  # (a view: only the crops the walls are read on are copied)
         out = FrameTrace(index=index)
         rows_p, cols_p, level = _profiles(img[slice(*self._reg_rows)])
         gain = level / self._reg_level if self._reg_level > 0 else 1.0
@@ -1082,7 +1232,7 @@ class SilhouetteTracer:
             img = np.rot90(frame, self.k)
         out.figures["light_gain"] = float(gain)
         try:
-            w, dx, dy = self._walls(img, rows_p, cols_p)
+            w, dx, dy, out.figures["clipped_share"] = self._walls(img, rows_p, cols_p, raw)
         except ChamberNotFound as err:
             out.message = f"chamber walls not found: {err}"
             out.flag, out.flag_figure, out.flag_value = "no_membrane", "wall_rms", np.nan

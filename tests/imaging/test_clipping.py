@@ -49,17 +49,23 @@ def test_raised_brightens_only_the_masked_pixels_in_a_copy():
     assert out.dtype == np.float32 and v[0, 1] == 255
 
 
+def _relit(s, factor=1.0, stray=0.0):
+    """``s``'s frames after the first with their light times ``factor`` plus ``stray`` of the 16-bit full scale,
+    cut at it (a camera's exposure turned up, or stray light added), and their extraction."""
+    frames = np.asarray(s.frames).astype(float)
+    frames[1:] = frames[1:] * factor + stray * 65535.0
+    frames = np.clip(np.rint(frames), 0, 65535).astype(np.uint16)
+    a, h, l0 = (s.truth.attrs[k] for k in ("chamber_radius", "chamber_depth", "membrane_thickness"))
+    ds = extract(frames, pixel_size=s.truth.attrs["pixel_size"], chamber=Chamber(a, h, l0, 3000.0), progress=False,
+                 frame_interval=600.0)
+    return frames, ds
+
+
 def _painted(light_factor):
     """painted_band (the band route: the well's liquid as light as the water, 0.8 of full scale, over a grey
-    base), its later frames' light times ``light_factor`` and cut at the 16-bit full scale."""
+    base), its later frames' light times ``light_factor``, cut at the 16-bit full scale."""
     s = render_look("painted_band", [0.0, 0.6, 1.5], shape=(700, 900), lambda_pre=PRE)
-    frames = np.asarray(s.frames).astype(float)
-    frames[1:] *= light_factor
-    frames = np.clip(np.rint(frames), 0, 65535).astype(np.uint16)
-    p = s.truth.attrs["pixel_size"]
-    a, h, l0 = (s.truth.attrs[k] for k in ("chamber_radius", "chamber_depth", "membrane_thickness"))
-    ds = extract(frames, pixel_size=p, chamber=Chamber(a, h, l0, 3000.0), progress=False, frame_interval=600.0)
-    return s, frames, ds
+    return (s, *_relit(s, light_factor))
 
 
 def test_the_band_routes_walls_read_in_clipped_light_are_flagged():
@@ -101,3 +107,29 @@ def test_wall_clipping_reads_the_clipped_side_of_each_wall():
     assert tr.k == 0 and well_level > np.median(frame[int(y), : int(x - g.rim_radius) - 20])  # (lighter than the base)
     cut = np.clip(np.rint(frame * 65535.0 / (0.97 * well_level)), 0, 65535).astype(np.uint16)
     assert wall_clipping(FrameView(cut, tr.k), g) > 0.9
+
+
+@pytest.mark.parametrize("name, factor, stray", [("edge_dark", 1.6, 0.0), ("halo", 1.0, 0.5), ("inverted", 1.3, 0.0),
+                                                 ("inverted", 1.6, 0.0)])
+def test_the_silhouette_routes_walls_in_clipped_light_are_read_from_what_was_recorded(name, factor, stray):
+    """A look's light after the first frame 1.3x or 1.6x, or 0.5 of full scale added (halo), cut at the full
+    scale: the water, the base's light or inverted's bright wall lines clip.  Read against the clipped light the
+    walls' half level was too low: at 9b0e51f these frames read halo's rims 0.63-0.66 px off and inverted's
+    (1.6x) 0.58-0.62 px, ok (silent), inverted's at 1.3x 0.36-0.42 px.  Their walls are now read by matching the
+    first frame's profile across each wall over the pixels the camera recorded (``clipped_share``, the share
+    left out near the walls: 0.36-0.54 measured): no frame is wrong and ok, the relit rims within 0.3 px
+    (0.003-0.15 measured); inverted's last frame at 1.6x, its wall lines clipped through their edge, is lost,
+    flagged, saying so."""
+    s = render_look(name, [0.0, 0.6, 2.0], shape=(860, 1000), lambda_pre=PRE)
+    frames, ds = _relit(s, factor, stray)
+    assert clipped_share(frames[1]) > clipped_share(frames[0])
+    sc = score(s.truth, ds)
+    ok = ds.flag.values == "ok"
+    assert sc["n_silent"] == 0, (list(ds.flag.values), sc["rim_bias_px"])
+    assert np.all(np.abs(sc["rim_bias_px"][1:][ok[1:]]) < 0.3), sc["rim_bias_px"]
+    assert np.all(ds.clipped_share.values[1:][ok[1:]] > 0.0)  # (read by the profile match)
+    if name == "inverted" and factor == 1.6:
+        lost = ~ok
+        assert all("clipped" in str(m) for m in ds.message.values[lost])
+    else:
+        assert ok.all(), list(ds.flag.values)

@@ -877,7 +877,7 @@ def test_the_noise_is_the_changes_spread_over_the_water(edge_dark):
     tr = SilhouetteTracer(edge_dark.frames[0], **_known(edge_dark))
     frame = np.asarray(edge_dark.frames[2])
     img = np.rot90(frame, tr.k)
-    w, dx, dy = tr._walls(img, *_profiles(img[slice(*tr._reg_rows)])[:2])
+    w, dx, dy, _ = tr._walls(img, *_profiles(img[slice(*tr._reg_rows)])[:2])
 
     def sample(points, directions, offsets, own=True):  # (no neighbours: the same either way)
         return tr._change(frame, points, directions, offsets, dx, dy)
