@@ -36,7 +36,9 @@ place (``Nuisances.debris``).  ``--start V0`` starts the series at Vtilde V0
 changes the light's gradient across the field by D from the first frame to the
 last (``Nuisances.light_drift``: +-D at the field's sides by the last frame), and
 ``--stray-light S`` adds stray light growing to S of full scale on one side by
-the last frame (``Nuisances.stray_light``).
+the last frame (``Nuisances.stray_light``), and ``--exposure-drift D`` turns the
+exposure up to 1 + D by the last frame (``Nuisances.exposure_drift``; the light
+over the full scale clips).
 """
 
 from __future__ import annotations
@@ -75,28 +77,29 @@ def _as_jpeg(frames, quality):
     return np.stack(out)
 
 
-def _nuisances(name, n, events=None, stamp="none", focus_drift=0.0, debris=0, light_drift=0.0, stray_light=0.0):
+def _nuisances(name, n, events=None, stamp="none", focus_drift=0.0, debris=0, light_drift=0.0, stray_light=0.0,
+               exposure_drift=0.0):
     """The look's nuisances with the events of ``--events`` in a series of n frames, the ``--stamp``, the
-    ``--focus-drift`` (m; none for a painted look), the ``--debris``, the ``--light-drift`` and the
-    ``--stray-light``."""
+    ``--focus-drift`` (m; none for a painted look), the ``--debris``, the ``--light-drift``, the
+    ``--stray-light`` and the ``--exposure-drift``."""
     look = _look(name)
     torn = {} if events is None else {"delaminated_frames": (n // 3,), "fractured_frames": (n // 2, n - 2), **{
         "gap": {"fracture_gap": 0.15}, "polar": {"fracture_gap": 0.4},
         "collapsed": {"fracture_mode": "collapsed"}}[events]}
     focus = focus_drift if look.optics is not None else 0.0
     return replace(look.nuisances, time_stamp=stamp, focus_drift=focus, debris=debris, light_drift=light_drift,
-                   stray_light=stray_light, **torn)
+                   stray_light=stray_light, exposure_drift=exposure_drift, **torn)
 
 
 def row(name, vt, events=None, stamp="none", focus_drift=0.0, dilution=False, jpeg=None, debris=0, light_drift=0.0,
-        stray_light=0.0):
+        stray_light=0.0, exposure_drift=0.0):
     t0 = time.perf_counter()
     optics = _look(name).optics
     if optics is not None and dilution:
         optics = replace(optics, dilution=True)
     s = render_look(name, vt, lambda_pre=PRE,
                     nuisances=_nuisances(name, len(vt), events, stamp, focus_drift, debris, light_drift,
-                                         stray_light),
+                                         stray_light, exposure_drift),
                     optics=optics)
     t_render = time.perf_counter() - t0
     a, h, l0 = (s.truth.attrs[k] for k in ("chamber_radius", "chamber_depth", "membrane_thickness"))
@@ -139,6 +142,8 @@ def main():
                     help="the light's gradient across the field changes by D from the first frame to the last")
     ap.add_argument("--stray-light", type=float, default=0.0, metavar="S",
                     help="stray light growing to S of full scale on one side by the last frame")
+    ap.add_argument("--exposure-drift", type=float, default=0.0, metavar="D",
+                    help="the exposure turned up to 1 + D by the last frame (light over the full scale clips)")
     args = ap.parse_args()
     vt = np.linspace(0.0, 4.0, args.frames) ** 1.5 / 2.0
     if args.start:
@@ -160,11 +165,12 @@ def main():
         events += "" if not args.start else f" (first frame at Vtilde {args.start:g})"
         events += "" if not args.light_drift else f" (light's gradient drifting by {args.light_drift:g})"
         events += "" if not args.stray_light else f" (stray light to {args.stray_light:g} of full scale)"
+        events += "" if not args.exposure_drift else f" (exposure to {1 + args.exposure_drift:g}x)"
         print(f"\n## {title}{events}: Vtilde {', '.join(f'{x:.2f}' for x in vt)}\n")
         print(head)
         for name in looks:
             print(row(name, vt, args.events, args.stamp, args.focus_drift * 1e-6, args.dilution, args.jpeg,
-                      args.debris, args.light_drift, args.stray_light),
+                      args.debris, args.light_drift, args.stray_light, args.exposure_drift),
                   flush=True)
 
 

@@ -170,6 +170,11 @@ class Nuisances:
         The lamp or the exposure changing between frames: every frame after
         the first has its light scaled by ``1 + exposure_sigma * N(0, 1)``
         (at least 0.3, at most 2), independently; the truth's ``light_gain``.
+    exposure_drift : float
+        The exposure (or the lamp) turned up over the series: frame ``i``'s
+        light times ``1 + exposure_drift (t_i - t_0)/(t_last - t_0)`` (with
+        ``exposure_sigma``'s); light over the full scale clips there, as a
+        camera's does (-0.9 .. 3); the truth's ``light_gain``.
     dust_count : int
         Dust specks on the optics (fixed in the camera frame).
     dust_radius : tuple of float, px
@@ -245,6 +250,7 @@ class Nuisances:
     drift_sigma: float = 0.0
     drift: object = None
     exposure_sigma: float = 0.0
+    exposure_drift: float = 0.0
     dust_count: int = 0
     dust_radius: tuple = (2.0, 6.0)
     dust_opacity: float = 0.5
@@ -282,6 +288,7 @@ class Nuisances:
             "tilt": (-45.0, 45.0),
             "drift_sigma": (0.0, 100.0),
             "exposure_sigma": (0.0, 0.5),
+            "exposure_drift": (-0.9, 3.0),
             "dust_opacity": (0.0, 1.0),
             "delamination_length": (0.01, 2.0),
             "delamination_gap": (0.0, 20.0),
@@ -1100,6 +1107,7 @@ def render_series(
             shade = passing if dust is None else dust * passing
             debris.append(np.column_stack((np.full(len(where), i), where)))
         frac = (times[i] - times[0]) / (times[-1] - times[0]) if times[-1] != times[0] else 0.0  # (of the series)
+        gains[i] *= 1.0 + nuis.exposure_drift * frac  # (the exposure turned up over the series)
         light = illum
         if nuis.light_drift != 0.0 and frac:  # (the light's gradient drifting over the series)
             light = _illumination((rows, cols), nuis, nuis.illumination_gradient + nuis.light_drift * frac)
@@ -1133,7 +1141,7 @@ def render_series(
     if nb:
         truth["neighbour_gap"] = ("time", nb_gap, {"units": "m", "long_name": "least gap between the dome's band "
                                                   "and a neighbour's (< 0: they overlap, the frame is touching)"})
-    if nuis.exposure_sigma > 0:
+    if nuis.exposure_sigma > 0 or nuis.exposure_drift != 0:
         truth["light_gain"] = ("time", gains, {"units": "1", "long_name": "the frame's light over the first "
                                                 "frame's (the lamp, the exposure)"})
     truth.attrs["dust_specks"] = specks.ravel() if specks.size else "none"

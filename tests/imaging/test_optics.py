@@ -441,3 +441,23 @@ def test_score_counts_silent_errors():
     sc = score(truth, ds)
     assert sc["frac_volume_ok"] == 1.0 and sc["n_events"] == 1 and sc["n_events_flagged"] == 1
     assert sc["event"].tolist() == [False, True]
+
+
+def test_the_exposure_drifts_over_the_series_and_clips_at_full_scale():
+    """Nuisances(exposure_drift=d): frame i's light times 1 + d (t_i - t_0)/(t_last - t_0) (no noise: within the
+    rounding of each), the first frame as without it, the light over the full scale at it (a camera's clip), and
+    the truth's light_gain the factor."""
+    ch, p = (150e-6, 110e-6, 20e-6), 1.6e-6
+    kw = {"chamber": ch, "pixel_size": p, "shape": (420, 400), "optics": Optics(), "seed": 5,
+          "times": [0.0, 600.0, 2400.0]}
+    nu = Nuisances(blur_sigma=0.5)
+    plain = render_series([0.0, 1.0, 2.0], nuisances=nu, **kw)
+    s = render_series([0.0, 1.0, 2.0], nuisances=replace(nu, exposure_drift=0.6), **kw)
+    np.testing.assert_array_equal(s.frames[0], plain.frames[0])
+    np.testing.assert_allclose(s.truth.light_gain.values, [1.0, 1.15, 1.6])
+    for i, gain in ((1, 1.15), (2, 1.6)):
+        want = plain.frames[i].astype(float) * gain
+        under = want < 65535.0 - gain
+        assert np.all(np.abs(s.frames[i][under] - want[under]) <= 0.5 * gain + 0.5 + 1e-6)
+        assert np.all(s.frames[i][want > 65535.0 + gain] == 65535)
+    assert np.mean(s.frames[2] == 65535) > 0.3 and np.all(plain.frames[2] < 65535)  # (the water clips)
