@@ -811,8 +811,9 @@ def _shift_misfits(f, seen, y, flat, bad, cols, shifts):
     out = np.full(len(shifts), np.inf)
     ok = n >= max(_SHIFT_SEEN * f.size, 5)
     if np.any(ok):
-        scale = np.sqrt(np.einsum("sii->si", ata[ok])) + 1e-30  # (the normal equations scaled: well conditioned)
-        a_s = ata[ok] / scale[:, :, None] / scale[:, None, :]
+        scale = np.sqrt(np.einsum("sii->si", ata[ok])) + 1e-30  # (the normal equations scaled: well conditioned;
+        # a ridge of 1e-10 so that a band whose first-frame light is one grey, its columns collinear, is no error)
+        a_s = ata[ok] / scale[:, :, None] / scale[:, None, :] + 1e-10 * np.eye(4)
         c = np.linalg.solve(a_s, (atf[ok] / scale)[..., None])[..., 0]
         rss = ftf[ok] - np.einsum("si,si->s", c, atf[ok] / scale)
         out[ok] = np.maximum(rss, 0.0) / (n[ok] - 4)
