@@ -1073,14 +1073,14 @@ class SilhouetteTracer:
                 g, mx = self.prev.geometry, dx - self.prev.drift[0]
                 near = (g.line.x0 - g.rim_radius + mx - c0, g.line.x0 + g.rim_radius + mx - c1)
             w, share = self._shifted_walls(np.asarray(crop, float), flat, clip, clip0, top - lo, at, near)
-            return replace(w, top_row=w.top_row + lo, base_row=w.base_row + lo, left=w.left + c0,
-                           right=w.right + c1), dx, dy, share
-        light = self._bg[np.ix_(rows, moved)]
-        light = light + self._light_change(crop, rows, moved, light)
-        w = find_walls(crop, self.l0, depth_px=self.depth, top_row=top - lo, strip=_STRIP,
-                       near=(left - c0, right - c1), light=light)
+        else:
+            light = self._bg[np.ix_(rows, moved)]
+            light = light + self._light_change(crop, rows, moved, light)
+            w = find_walls(crop, self.l0, depth_px=self.depth, top_row=top - lo, strip=_STRIP,
+                           near=(left - c0, right - c1), light=light)
+            share = 0.0
         return replace(w, top_row=w.top_row + lo, base_row=w.base_row + lo, left=w.left + c0,
-                       right=w.right + c1), dx, dy, 0.0
+                       right=w.right + c1), dx, dy, share
 
     def _shifted_walls(self, crop, flat, clip, clip0, top, at, near):
         """The walls of a frame with more light clipped than the first frame (:data:`_CLIP_GROWTH`), read by
