@@ -61,6 +61,10 @@ _FIGURES = {
                         "by over 25 %)"),
 }
 
+#: the quality figures that are lengths: a tracer gives them in px, the dataset in m (``flag_value`` too)
+_LENGTH_FIGURES = frozenset(k for k, (unit, _) in _FIGURES.items() if unit == "m") | {
+    "field_margin", "flat_lift", "flat_film", "low_dome", "wall_rms", "line_rms"}
+
 #: how the chamber and dome are read: ``band`` (filled membrane band, grey step between well and base) or
 #: ``silhouette`` (faces and walls seen by the light they bend away, any look; imaging._facetrace)
 TRACERS = ("auto", "band", "silhouette")
@@ -780,7 +784,8 @@ def _store(i, res, run, frame, p):
     flag_figure[i] = res.flag_figure
     source_kind[i] = res.source
     message[i] = res.message
-    scal["flag_value"][i] = res.flag_value
+    # (in the units of the figure's own variable: px -> m for a length)
+    scal["flag_value"][i] = res.flag_value * (p if res.flag_figure in _LENGTH_FIGURES else 1.0)
     scal["drift_x"][i], scal["drift_y"][i] = res.drift
     for k in _FIGURES:  # (the tracers' quality figures)
         v = res.figures.get(k, np.nan)
@@ -906,7 +911,8 @@ def _dataset(run, times, p, chamber_attrs, src, settings, bulge_direction, chamb
         "lambda_pre": var(lam, "1", "rim pre-stretch R/R0, R0 the flat frame's rim radius (supplement Sec. 5.7)"),
         "flag": var(flag.astype(str), None, "frame quality: " + "|".join(FLAGS)),
         "flag_figure": var(flag_figure.astype(str), None, "quality figure that set the flag"),
-        "flag_value": var(scal["flag_value"], "1", "value of the figure that set the flag (units of that figure)"),
+        "flag_value": var(scal["flag_value"], "m or 1", "value of the figure that set the flag, in that figure's "
+                          "units: m for a length (" + ", ".join(sorted(_LENGTH_FIGURES)) + "), else 1"),
         "message": var(message.astype(str), None, "why a frame could not be measured"),
         "tilt": var(scal["tilt"], "deg", "tilt of the flat membrane, counter-clockwise as displayed"),
         "drift_x": var(scal["drift_x"], "px", "drift of the chamber along the view columns since frame 0 "

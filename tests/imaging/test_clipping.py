@@ -82,6 +82,8 @@ def test_the_band_routes_walls_read_in_clipped_light_are_flagged():
     assert list(ds.flag.values) == ["ok", "poor_fit", "poor_fit"]
     assert list(ds.flag_figure.values) == ["", "clipped", "clipped"]
     assert np.all(ds.clipped.values[1:] / p > MOVED_FLAG) and ds.clipped.values[0] == 0.0
+    # (the flag's value is the figure's own, in its units: m)
+    np.testing.assert_array_equal(ds.flag_value.values[1:], ds.clipped.values[1:])
     assert "clipped" in str(ds.message.values[1]) and "exposure" in str(ds.message.values[1])
     assert np.all(np.abs(sc["rim_bias_px"][1:]) > 0.5)  # (what the flag stands for: the rims are wrong)
     assert sc["n_silent"] == 0
