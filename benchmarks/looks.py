@@ -39,6 +39,11 @@ last (``Nuisances.light_drift``: +-D at the field's sides by the last frame), an
 the last frame (``Nuisances.stray_light``), and ``--exposure-drift D`` turns the
 exposure up to 1 + D by the last frame (``Nuisances.exposure_drift``; the light
 over the full scale clips).
+
+``--drawn N [--batch B]`` measures N looks drawn at random from plausible
+ranges (:func:`osmobulge.imaging.looks.drawn_look`; the batch defaults to
+today's date, so a new day's batch is new held-out looks nobody has tuned on;
+the batches measured are kept in ``DRAWN_BATCHES``) instead of the named ones.
 """
 
 from __future__ import annotations
@@ -50,16 +55,11 @@ from dataclasses import replace
 import numpy as np
 
 from osmobulge.imaging.extract import extract
-from osmobulge.imaging.looks import HELD_OUT_LOOKS, LOOKS, OUTSIDE_LOOKS, render_look, score
+from osmobulge.imaging.looks import HELD_OUT_LOOKS, LOOKS, OUTSIDE_LOOKS, get_look, render_look, score
 from osmobulge.modeling import PreStretch
 from osmobulge.modeling.transport import Chamber
 
 PRE = PreStretch(0.01, 0.0)
-
-
-def _look(name):
-    """The named look, wherever it is kept."""
-    return LOOKS.get(name) or HELD_OUT_LOOKS.get(name) or OUTSIDE_LOOKS[name]
 
 
 def _as_jpeg(frames, quality):
@@ -82,7 +82,7 @@ def _nuisances(name, n, events=None, stamp="none", focus_drift=0.0, debris=0, li
     """The look's nuisances with the events of ``--events`` in a series of n frames, the ``--stamp``, the
     ``--focus-drift`` (m; none for a painted look), the ``--debris``, the ``--light-drift``, the
     ``--stray-light`` and the ``--exposure-drift``."""
-    look = _look(name)
+    look = get_look(name)
     torn = {} if events is None else {"delaminated_frames": (n // 3,), "fractured_frames": (n // 2, n - 2), **{
         "gap": {"fracture_gap": 0.15}, "polar": {"fracture_gap": 0.4},
         "collapsed": {"fracture_mode": "collapsed"}}[events]}
@@ -94,7 +94,7 @@ def _nuisances(name, n, events=None, stamp="none", focus_drift=0.0, debris=0, li
 def row(name, vt, events=None, stamp="none", focus_drift=0.0, dilution=False, jpeg=None, debris=0, light_drift=0.0,
         stray_light=0.0, exposure_drift=0.0):
     t0 = time.perf_counter()
-    optics = _look(name).optics
+    optics = get_look(name).optics
     if optics is not None and dilution:
         optics = replace(optics, dilution=True)
     s = render_look(name, vt, lambda_pre=PRE,
@@ -144,6 +144,10 @@ def main():
                     help="stray light growing to S of full scale on one side by the last frame")
     ap.add_argument("--exposure-drift", type=float, default=0.0, metavar="D",
                     help="the exposure turned up to 1 + D by the last frame (light over the full scale clips)")
+    ap.add_argument("--drawn", type=int, default=0, metavar="N",
+                    help="measure N looks drawn at random (imaging.looks.drawn_look) instead of the named ones")
+    ap.add_argument("--batch", type=int, default=int(time.strftime("%Y%m%d")), metavar="B",
+                    help="the drawn looks' batch (default today's date: new looks)")
     args = ap.parse_args()
     vt = np.linspace(0.0, 4.0, args.frames) ** 1.5 / 2.0
     if args.start:
@@ -152,7 +156,10 @@ def main():
             " worst dlambda | flagged | events flagged | silent | render/frame | extract/frame |\n"
             "|---|---|---|---|---|---|---|---|---|---|---|---|")
     groups = [("held-out looks (never tuned on)", HELD_OUT_LOOKS)]
-    if not args.held_out_only:
+    if args.drawn:
+        groups = [(f"looks drawn at random, batch {args.batch}",
+                   [f"drawn_{args.batch}_{k}" for k in range(args.drawn)])]
+    elif not args.held_out_only:
         groups.insert(0, ("presets", LOOKS))
         groups.append(("outside the method (must be refused with a reason)", OUTSIDE_LOOKS))
     for title, looks in groups:

@@ -7,9 +7,12 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
+from osmobulge.imaging.extract import extract
 from osmobulge.imaging.looks import HELD_OUT_LOOKS, LOOKS, OUTSIDE_LOOKS, render_look, score
 from osmobulge.imaging.optics import Collapse, Hole, Optics, _splat, optical_path, transmission
 from osmobulge.imaging.synthetic import Nuisances, SceneGeometry, _Frame, _Scene, render_series
+from osmobulge.modeling import PreStretch
+from osmobulge.modeling.transport import Chamber
 
 
 def _mc_transmission(theta, o):
@@ -419,6 +422,50 @@ def test_looks_render_and_held_out_is_disjoint():
     assert s.truth.attrs["optics_n_elastomer"] == pytest.approx(1.412)
     with pytest.raises(ValueError, match="unknown look"):
         render_look("nope", [0.0])
+
+
+def test_drawn_looks_keep_to_their_stated_ranges():
+    """drawn_look: the same batch and k give the same look; 300 draws keep to the ranges its docstring states,
+    each optional nuisance in about its stated share of the looks, every dome at Vtilde 4 within 900 px."""
+    from osmobulge.imaging.looks import DRAWN_BATCHES, drawn_look, get_look
+
+    assert drawn_look(7, 3) == drawn_look(7, 3) == get_look("drawn_7_3") != drawn_look(7, 4)
+    looks = [drawn_look(1, k) for k in range(300)]
+    o = {f: np.array([getattr(lk.optics, f) for lk in looks]) for f in
+         ("n_elastomer", "n_liquid", "objective_na", "condenser_na", "defocus", "halo_strength", "absorption_film",
+          "absorption_base", "dilution")}
+    n = {f: np.array([getattr(lk.nuisances, f) for lk in looks], dtype=object) for f in
+         ("noise_sigma", "drift_sigma", "exposure_drift", "stray_light", "focus_drift", "debris", "bit_depth",
+          "polarity", "time_stamp", "neighbours")}
+    a = np.array([lk.chamber[0] for lk in looks])
+    px = np.array([lk.pixel_size for lk in looks])
+    assert np.all((o["n_elastomer"] >= 1.405) & (o["n_elastomer"] <= 1.435))
+    assert np.all((o["n_liquid"] >= 1.34) & (o["n_liquid"] <= 1.365))
+    assert np.all(o["condenser_na"] <= np.minimum(0.2, 0.8 * o["objective_na"]))
+    assert np.all(np.abs(o["defocus"]) <= 8e-6) and np.all((a >= 100e-6) & (a <= 200e-6))
+    assert np.all((2.5 * a + 200e-6) / px <= 900.0 + 1e-9)
+    for share, hit in ((0.5, o["halo_strength"] > 0), (0.15, o["absorption_film"] > 0), (0.5, o["dilution"]),
+                       (0.15, px == 2e-6), (0.3, n["exposure_drift"] != 0), (0.3, n["stray_light"] != 0),
+                       (0.4, n["focus_drift"] != 0), (0.3, n["debris"] > 0), (0.15, n["polarity"] == -1),
+                       (0.2, n["time_stamp"] != "none"), (0.25, np.array([len(x) > 0 for x in n["neighbours"]]))):
+        assert abs(np.mean(hit.astype(float)) - share) < 4 * np.sqrt(share * (1 - share) / len(looks)), share
+    assert set(n["bit_depth"]) == {8, 10, 12, 16}
+    directions = {lk.scene.bulge_direction for lk in looks}
+    assert directions == {"up", "down", "left", "right"}
+    assert 20261207 in DRAWN_BATCHES
+
+
+def test_a_drawn_look_measured_blind_reads_right():
+    """drawn_20261207_3, measured once blind (9 frames: all ok, worst 0.32 of the tolerance): a dyed film, halos,
+    the focal plane drifting 4.6 um, particles drifting in the water, a time stamp, 1.45 um pixels, 16 bits."""
+    s = render_look("drawn_20261207_3", [0.0, 1.0, 4.0], lambda_pre=PreStretch(0.01, 0.0))
+    assert s.truth.attrs["look"] == "drawn_20261207_3"
+    a, h, l0 = (s.truth.attrs[k] for k in ("chamber_radius", "chamber_depth", "membrane_thickness"))
+    ds = extract(s.frames, pixel_size=s.truth.attrs["pixel_size"], chamber=Chamber(a, h, l0, 3000.0),
+                 progress=False, frame_interval=600.0)
+    sc = score(s.truth, ds)
+    assert list(ds.flag.values) == ["ok"] * 3 and sc["n_silent"] == 0
+    assert np.all(sc["dv_tol"] <= 1.0) and np.all(np.abs(sc["rim_bias_px"]) <= 0.5), (sc["dv_tol"], sc["rim_bias_px"])
 
 
 def test_score_counts_silent_errors():
