@@ -40,6 +40,9 @@ the last frame (``Nuisances.stray_light``), and ``--exposure-drift D`` turns the
 exposure up to 1 + D by the last frame (``Nuisances.exposure_drift``; the light
 over the full scale clips).
 
+``--stage-jumps A`` moves every frame after the first by a random (rows, columns)
+within +-A px (interpolated; the rows and columns a move brings in repeat the
+edge's), as a multi-position series revisiting its positions or a bumped stage.
 ``--drawn N [--batch B]`` measures N looks drawn at random from plausible
 ranges (:func:`osmobulge.imaging.looks.drawn_look`; the batch defaults to
 today's date, so a new day's batch is new held-out looks nobody has tuned on;
@@ -91,8 +94,19 @@ def _nuisances(name, n, events=None, stamp="none", focus_drift=0.0, debris=0, li
                    stray_light=stray_light, exposure_drift=exposure_drift, **torn)
 
 
+def _jumped(frames, amplitude, seed=5):
+    """Every frame after the first moved by a random (rows, columns) within +-amplitude px (linear interpolation,
+    the edges' rows and columns repeated into the field)."""
+    from scipy import ndimage
+
+    rng = np.random.default_rng(seed)
+    shifts = np.vstack([[0.0, 0.0], rng.uniform(-amplitude, amplitude, (len(frames) - 1, 2))])
+    return np.stack([np.rint(ndimage.shift(np.asarray(f, float), d, order=1, mode="nearest")).astype(f.dtype)
+                     for f, d in zip(frames, shifts, strict=True)])
+
+
 def row(name, vt, events=None, stamp="none", focus_drift=0.0, dilution=False, jpeg=None, debris=0, light_drift=0.0,
-        stray_light=0.0, exposure_drift=0.0):
+        stray_light=0.0, exposure_drift=0.0, stage_jumps=0.0):
     t0 = time.perf_counter()
     optics = get_look(name).optics
     if optics is not None and dilution:
@@ -103,7 +117,8 @@ def row(name, vt, events=None, stamp="none", focus_drift=0.0, dilution=False, jp
                     optics=optics)
     t_render = time.perf_counter() - t0
     a, h, l0 = (s.truth.attrs[k] for k in ("chamber_radius", "chamber_depth", "membrane_thickness"))
-    frames = s.frames if jpeg is None else _as_jpeg(s.frames, jpeg)
+    frames = s.frames if not stage_jumps else _jumped(s.frames, stage_jumps)
+    frames = frames if jpeg is None else _as_jpeg(frames, jpeg)
     t0 = time.perf_counter()
     try:
         ds = extract(frames, pixel_size=s.truth.attrs["pixel_size"], chamber=Chamber(a, h, l0, 3000.0),
@@ -144,6 +159,8 @@ def main():
                     help="stray light growing to S of full scale on one side by the last frame")
     ap.add_argument("--exposure-drift", type=float, default=0.0, metavar="D",
                     help="the exposure turned up to 1 + D by the last frame (light over the full scale clips)")
+    ap.add_argument("--stage-jumps", type=float, default=0.0, metavar="A",
+                    help="move every frame after the first by a random (rows, columns) within +-A px")
     ap.add_argument("--drawn", type=int, default=0, metavar="N",
                     help="measure N looks drawn at random (imaging.looks.drawn_look) instead of the named ones")
     ap.add_argument("--batch", type=int, default=int(time.strftime("%Y%m%d")), metavar="B",
@@ -173,11 +190,12 @@ def main():
         events += "" if not args.light_drift else f" (light's gradient drifting by {args.light_drift:g})"
         events += "" if not args.stray_light else f" (stray light to {args.stray_light:g} of full scale)"
         events += "" if not args.exposure_drift else f" (exposure to {1 + args.exposure_drift:g}x)"
+        events += "" if not args.stage_jumps else f" (stage jumps within +-{args.stage_jumps:g} px)"
         print(f"\n## {title}{events}: Vtilde {', '.join(f'{x:.2f}' for x in vt)}\n")
         print(head)
         for name in looks:
             print(row(name, vt, args.events, args.stamp, args.focus_drift * 1e-6, args.dilution, args.jpeg,
-                      args.debris, args.light_drift, args.stray_light, args.exposure_drift),
+                      args.debris, args.light_drift, args.stray_light, args.exposure_drift, args.stage_jumps),
                   flush=True)
 
 

@@ -306,6 +306,13 @@ def _profiles(img):
     return r - level, c - c.mean(), level
 
 
+def _deep(rows_p, start):
+    """The base's row profile from ``start`` rows into it on, less its mean (what the vertical drift is read
+    from: clear of the film)."""
+    part = rows_p[start:]
+    return part - part.mean()
+
+
 class _Shift1D:
     """The shift of a 1-D profile against a reference one, by phase correlation (no normalisation) refined on a
     grid of ``1 / upsample`` px: :func:`skimage.registration.phase_cross_correlation` in one dimension (its
@@ -936,10 +943,17 @@ class SilhouetteTracer:
         self._clip0 = None if clip0 is None else np.rot90(clip0, self.k)
         self._bg = np.ascontiguousarray(light, np.float32)  # (in the view)
         self.view_shape = img.shape
-        # the base below the film (walls, well bottom), registered frame to frame; no dome there
+        # the base below the film (walls, well bottom), registered frame to frame; no dome there.  The vertical
+        # drift is read from its rows from half the well's depth below the film on (``_reg_deep`` into them): a
+        # frame moved down by less than that keeps the film out of them (read from all of them, 5 px below the
+        # film on, a frame the stage moved 6-8 px down brought the film's band into their top rows, which then
+        # outweighed the well's bottom face: the drift read 40 px off, the walls lost; 2 of the held-out looks,
+        # moved by up to 20 px each way, read frames 3x and 26x their volume tolerance off, ok)
         self._reg_rows = (int(np.ceil(w.base_row + 5)), min(int(w.base_row + self.depth) + 40, img.shape[0]))
+        self._reg_deep = min(int(np.ceil(max(0.5 * self.depth - 5.0, 0.0))),
+                             (self._reg_rows[1] - self._reg_rows[0]) // 2)
         rows_p, cols_p, self._reg_level = _profiles(img[slice(*self._reg_rows)])
-        self._reg_ref = (_Shift1D(rows_p), _Shift1D(cols_p))
+        self._reg_ref = (_Shift1D(_deep(rows_p, self._reg_deep)), _Shift1D(cols_p))
         self.prev = None
         self._edge_reached = (None, np.inf)  # the last frame with a dome and its margin to the field's edge, px
         self._track = None  # the last ok frames' outer faces (u, z), px (one or two)
@@ -1035,7 +1049,7 @@ class SilhouetteTracer:
         before its light's gain was divided out)."""
         # the drift: the base's row and column profiles (its mean over columns and over rows; the well's bottom
         # face and the walls) registered against the first frame's, each by phase correlation
-        dy, dx = -self._reg_ref[0].shift(rows_p), -self._reg_ref[1].shift(cols_p)
+        dy, dx = -self._reg_ref[0].shift(_deep(rows_p, self._reg_deep)), -self._reg_ref[1].shift(cols_p)
         if max(abs(dx), abs(dy)) > self.settings.max_drift:
             raise ChamberNotFound(f"the base moved {np.hypot(dx, dy):.0f} px since the first frame, more than "
                                   f"max_drift ({self.settings.max_drift:g} px): if the stage was moved, raise it "

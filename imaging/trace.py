@@ -233,6 +233,11 @@ def field_edge_message(margin, index=None):
             "is not the dome's")
 
 
+#: a flat band fitted with more scatter than this (px), or this fraction off the first frame's width, is not the
+#: film's band (a stretch of it cut by the search window's edge, or another edge)
+_BAND_RMS, _BAND_WIDTH = 1.0, 0.25
+
+
 def first_flag(checks, fig):
     """``(flag, figure, value)`` of the first ``(flag, figure, hit)`` check that hits, else ``("ok", "", nan)``."""
     for name, key, hit in checks:
@@ -310,6 +315,12 @@ class ChamberTracer:
         self.priors = {}  # frame index -> (u, z) guide in chamber px
         # flat-line columns: away from every well's rim
         self._flat_u = self._flat_columns(view)
+        # the flat band's width as the line fit reads it in this frame (what a later frame's fit is held to;
+        # the chamber search's own estimate is another reading); nan, none held to, when the fit is not a band's
+        # (a first frame that is not flat: extract says so)
+        _, width, _, rms0, _ = measure_line(view, g.line, self._flat_u, polarity=g.polarity, thickness=g.thickness,
+                                            window=0.5 * g.thickness + 8.0)
+        self._band_width0 = width if np.isfinite(width) and width > 0 and rms0 < _BAND_RMS else np.nan
         self._rim_contact_u = self._rim_contact_columns()
         self._wall_grid = {}  # well depth -> the wall rows and offsets (_wall_rows_at)
 
@@ -490,11 +501,19 @@ class ChamberTracer:
         line, thick, con, rms, inl = measure_line(view, line, us, polarity=g0.polarity,
                                                   thickness=g0.thickness, window=win)
         if not coarse:
-            # the fine window holds the band only when it moved less than a few px: else its contrast drops
+            # the fine window holds the band only when it moved less than a few px: else its contrast drops, and
+            # a band cut by the window's edge reads thin and scattered (below: the stage moved 12 px between
+            # frames, the line fitted 4.5 px from where it was, the band 9.7 px for 24.9, scatter 1.9 px for 0.03,
+            # its contrast 0.52 of the first frame's; the frame read 5x its volume tolerance off, ok)
             _, _, n0, n1 = line._dn
             dz = abs((line.x0 - predicted.x0) * n0 + (line.y0 - predicted.y0) * n1)
             if not (dz < 6.0 and abs(con) > 0.5 * abs(g0.contrast)):
                 return None, drift
+        # (a nan width held to compares False: not checked)
+        if (np.isfinite(rms) and rms >= _BAND_RMS) or abs(thick - self._band_width0) >= _BAND_WIDTH * self._band_width0:
+            # not the film's band (the wide search, after the stage moved further than the drift read: a band
+            # 1.9 px wide, scattered 9.3 px, read 8x the volume tolerance off, ok): no chamber here
+            return None, drift
         well, wall_rms = self._walls(view, line, well)
         if well is None:
             return None, drift
