@@ -347,8 +347,10 @@ DRAWN_BATCHES = {
     # 9 frames, Vtilde 0 -> 4, the chamber given: 134 of 144 frames ok; the touching frames of the two looks with
     # neighbours flagged as the truth marks them (9 of 9, no other); one frame flagged falsely (drawn_20261207_9, Vtilde
     # 0.5: a drifting particle at the dome read as a straight stretch, least_bend), 0 silent; worst volume error
-    # 0.68 of the tolerance, rims within 0.23 px, lambda_pre within 0.24 %
-    20261207: 16,
+    # 0.68 of the tolerance, rims within 0.23 px, lambda_pre within 0.24 %.  Looks 16-23, measured once after the
+    # stage-jump changes: 0 silent, worst 0.85, rims within 0.20 px; look 20 frame 2 least_bend (4 particles a
+    # frame), look 23's 5 touching frames flagged fractured (gap_length), not touching
+    20261207: 24,
 }
 
 
