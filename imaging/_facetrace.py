@@ -373,12 +373,37 @@ def _walls_any_depth(maps, k, l0_px, depth_px, **locate):
     raise err
 
 
+#: the bottom face's strength next to each wall, as a share of its strength over the well's middle, below which the
+#: walls are not one well's (:func:`_bottom_span`)
+_BOTTOM_SPAN = 0.5
+
+
+def _bottom_span(d, w, depth):
+    """The well's bottom face's strength (the deviation map ``d``'s rows within 2 px of it) over the columns 4-15 %
+    of the well's width in from each wall, the weaker side's, as a share of it over the middle 60 %.
+
+    A well's bottom face runs from wall to wall.  Measured on drawn_20261207_23
+    cut to a 460 x 860 px field without the chamber given (wells 36 um apart,
+    every wall's zone alike on both sides): the chamber's left wall and the
+    neighbour's left one were paired, across the base between the wells; the
+    bottom face ended 34 px short of that wall, and the flat frame read ok
+    with its rim 17 px off.
+    """
+    r = int(round(w.base_row + depth))
+    rows = d[max(r - 2, 0) : r + 3]
+    width = w.right - w.left
+    mid = np.median(rows[:, int(w.left + 0.2 * width) : int(w.right - 0.2 * width)], axis=1).max()
+    ends = [np.median(rows[:, int(a) : max(int(b), int(a) + 1)], axis=1).max() for a, b in
+            ((w.left + 0.04 * width, w.left + 0.15 * width), (w.right - 0.15 * width, w.right - 0.04 * width))]
+    return float(min(ends) / mid) if mid > 0 else 0.0
+
+
 def _plausible(d, w, l0_px, depth_px):
     """Why the walls ``w`` found in a view (its deviation map ``d``) are not a chamber seen dome side up ("" if
     they are).
 
     The well's bottom face must lie below the walls (at ``depth_px`` within
-    15 % when known) and the flat film's lower face over the well ``l0_px``
+    15 % when known), reaching both (:func:`_bottom_span`), and the flat film's lower face over the well ``l0_px``
     below its top face (within 30 %, when known).
     """
     depth = SilhouetteTracer._depth(d, w)
@@ -390,6 +415,10 @@ def _plausible(d, w, l0_px, depth_px):
         return "no well bottom below the walls"
     if depth_px is not None and abs(depth - depth_px) > 0.15 * depth_px:
         return f"the well bottom is {depth:.0f} px below the top face's base, not {depth_px:.0f} px"
+    span = _bottom_span(d, w, depth)
+    if span < _BOTTOM_SPAN:
+        return (f"the well's bottom face reaches {span:.2f} of its strength beside the walls at columns "
+                f"{w.left:.0f} and {w.right:.0f}: they are not one well's (wells side by side: pass the chamber)")
     if l0_px is not None:
         l0 = _film_thickness(d, w.top_row, w.left, w.right, l0_px)
         if not (np.isfinite(l0) and abs(l0 - l0_px) <= 0.3 * l0_px):
@@ -970,7 +999,9 @@ class SilhouetteTracer:
         that is weak outside it (the bottom face), outside being the base's ``_BESIDE_PX`` columns beside each
         wall, 20 px out (not the whole field's: neighbouring wells' bottoms lie on the same row; measured on a
         look with a neighbour each side 133 px off, over most of the field's other columns, whose well was
-        refused as having no bottom)."""
+        refused as having no bottom), or the 10 columns 4 px beside each wall when they are weaker (measured on
+        drawn_20261207_23 in a 460 px wide field: the wells 33 px apart, the columns 20 px out lay in the
+        neighbours' wells, whose bottoms the chamber's matched, and the view was refused)."""
         base_row = w.base_row if base_row is None else base_row
         c0, c1 = int(w.left + 0.2 * (w.right - w.left)), int(w.right - 0.2 * (w.right - w.left))
         r0 = int(base_row + 20)
@@ -980,6 +1011,10 @@ class SilhouetteTracer:
         out_cols = np.r_[np.arange(max(int(w.left) - 20 - _BESIDE_PX, 0), max(int(w.left) - 20, 0)),
                          np.arange(min(int(w.right) + 20, d.shape[1]), min(int(w.right) + 20 + _BESIDE_PX, d.shape[1]))]
         outside = np.median(d[r0:, out_cols], axis=1) if out_cols.size else np.zeros_like(inside)
+        near = np.r_[np.arange(max(int(w.left) - 14, 0), max(int(w.left) - 4, 0)),
+                     np.arange(min(int(w.right) + 5, d.shape[1]), min(int(w.right) + 15, d.shape[1]))]
+        if near.size:  # (the base right beside the walls: those columns may lie in a neighbouring well)
+            outside = np.minimum(outside, np.median(d[r0:, near], axis=1))
         score = inside - outside
         k = int(np.argmax(score))
         return float(r0 + k - base_row) if score[k] > 0.1 else np.nan

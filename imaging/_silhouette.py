@@ -363,7 +363,10 @@ def _wall_pair(col_score, width, min_width, radius_px=None):
     """The columns of the two walls of the well nearest the field's centre (of the chamber's radius, when
     ``radius_px`` is given and the pair :func:`_zone_pair` finds is not of it).
 
-    With ``radius_px``: of the zones (:func:`_zone_peaks`), the two next to each other,
+    With ``radius_px``, when that pair's half-distance lies more than :data:`_RADIUS_TOL` off it or another zone
+    lies between them (measured on drawn_20261207_23 in a 460 x 860 px field: wells 36 um apart, every zone alike on
+    both sides, the chamber's left wall and the neighbour's left one were paired, 14 % over the radius, and the
+    route refused the view): of the zones (:func:`_zone_peaks`), the two next to each other,
     not of contrary sides, whose half-distance lies within
     :data:`_RADIUS_TOL` of the radius, nearest the field's centre (measured
     blind: three wells 40 um apart at 1.6 um/px, whose inner walls' zones lie
@@ -374,11 +377,12 @@ def _wall_pair(col_score, width, min_width, radius_px=None):
         pair, err = _zone_pair(col_score, width, min_width), None
     except ChamberNotFound as e:
         pair, err = None, e
-    if radius_px is None or (pair is not None and abs(0.5 * (pair[1] - pair[0]) / radius_px - 1.0) <= _RADIUS_TOL):
+    peaks = _zone_peaks(col_score)
+    if radius_px is None or (pair is not None and abs(0.5 * (pair[1] - pair[0]) / radius_px - 1.0) <= _RADIUS_TOL
+                             and not any(pair[0] + _RADIUS_GAP < c < pair[1] - _RADIUS_GAP for c in peaks)):
         if pair is None:
             raise err
         return pair
-    peaks = _zone_peaks(col_score)
     fit = _central_pair(peaks, [_wall_side(col_score, c) for c in peaks], width,
                         lambda cl, cr: abs(0.5 * (cr - cl) / radius_px - 1.0) <= _RADIUS_TOL)
     if fit is not None:
@@ -476,8 +480,8 @@ def neighbour_walls(maps, k, w, depth_px, strip=(0.15, 0.6), min_width=40):
 
     A neighbour on the right shows its left wall: a silhouette zone (as
     :func:`find_walls` reads them, in the same rows of the base) at least
-    ``min_width`` px right of the right wall, of a left wall's side
-    (:func:`_wall_side`), at least :data:`_WALL_SHARE` of the weaker of the
+    ``min_width`` px right of the right wall, not of a right wall's side
+    (:func:`_wall_side`; a zone whose flanks fall alike is taken), at least :data:`_WALL_SHARE` of the weaker of the
     well's own two zones, whose edge follows a straight line down the base
     (:data:`MAX_WALL_RMS`); the nearest such one; when there is none, the same
     of the zones' peaks (:func:`_zone_peaks`) from :data:`_RADIUS_GAP` px off the wall
@@ -509,8 +513,10 @@ def neighbour_walls(maps, k, w, depth_px, strip=(0.15, 0.6), min_width=40):
             right = c > w.right + gap
             if not (right or c < w.left - gap) or col_score[c] < _WALL_SHARE * own:
                 continue
-            side = _wall_side(col_score, c)
-            if side != (-1 if right else 1) or np.isfinite(out[int(right)]):
+            # (a zone whose flanks fall alike, side 0, is taken: measured on drawn_20261207_23, wells 36 um apart
+            # at 1.27 um/px, their near walls' zones 33 px apart and alike on both sides; the neighbours were not
+            # seen and the three touching domes were traced as one, flagged fractured)
+            if _wall_side(col_score, c) == (1 if right else -1) or np.isfinite(out[int(right)]):
                 continue
             u = _wall_edges(strip_sd, c) if not right else m - 1 - _wall_edges(strip_sd[:, ::-1], m - 1 - c)
             at, rms, n = _clipped_line(rows, u, float(w.base_row))

@@ -349,7 +349,8 @@ DRAWN_BATCHES = {
     # 0.5: a drifting particle at the dome read as a straight stretch, least_bend), 0 silent; worst volume error
     # 0.68 of the tolerance, rims within 0.23 px, lambda_pre within 0.24 %.  Looks 16-23, measured once after the
     # stage-jump changes: 0 silent, worst 0.85, rims within 0.20 px; look 20 frame 2 least_bend (4 particles a
-    # frame), look 23's 5 touching frames flagged fractured (gap_length), not touching
+    # frame), look 23's 5 touching frames flagged fractured (gap_length), not touching: its neighbours' walls (zones
+    # alike on both sides) were not taken; since taken, the 5 flagged touching, looks 0-22 unchanged
     20261207: 24,
 }
 

@@ -15,7 +15,7 @@ import pytest
 from osmobulge.imaging._chamber import ChamberNotFound
 from osmobulge.imaging._facetrace import SilhouetteTracer, _light_plane, _profiles, dark_background
 from osmobulge.imaging.extract import extract
-from osmobulge.imaging.looks import LOOKS, render_look, score
+from osmobulge.imaging.looks import LOOKS, get_look, render_look, score
 from osmobulge.imaging.synthetic import SceneGeometry
 from osmobulge.imaging.trace import TraceSettings
 from osmobulge.modeling import PreStretch
@@ -961,6 +961,32 @@ def test_three_wells_40_um_apart_growing_sideways_are_read_as_three():
     wide = Chamber(200e-6, 110e-6, 22e-6, 3000.0)
     with pytest.raises(ChamberNotFound, match=r"rim radius 150.\d um\) are not this chamber's \(radius 200.0 um"):
         extract(s.frames, pixel_size=p, frame_interval=600.0, chamber=wide, progress=False, tracer="silhouette")
+
+
+def test_wells_a_third_of_a_radius_apart_with_zones_alike_on_both_sides():
+    """drawn_20261207_23 (wells 2.27 radii apart, 36 um of base between them at 1.27 um/px, the domes growing
+    right): every wall's silhouette zone falls alike on both sides, so no zone's side is known.  The neighbours'
+    walls were not taken (only zones of the near wall's side were), the three domes were traced as one and the
+    touching frames flagged fractured; cut to 820 x 420 px, the view was refused even with the chamber given (the
+    bottom face's outside columns lay in the neighbours' wells).  Now the middle well, the neighbours seen and
+    the touching frame touching; without the chamber the two strongest zones were the chamber's left wall and
+    the neighbour's left one (the flat frame ok, its rim 17 px off): that pair is refused, its bottom face not
+    reaching one of its walls."""
+    s = render_look("drawn_20261207_23", [0.0, 0.35, 1.41], shape=(820, 420), lambda_pre=PRE)
+    p = s.truth.attrs["pixel_size"]
+    assert list(s.truth.flag.values) == ["ok", "ok", "touching"]
+    t = SilhouetteTracer(s.frames[0], **_known(s), radius_px=s.truth.attrs["chamber_radius"] / p)
+    assert t.walls0.rim_radius == pytest.approx(s.truth.attrs["chamber_radius"] / p, abs=0.5)
+    (off, _), (off2, _) = get_look("drawn_20261207_23").nuisances.neighbours
+    gap = (off2 - 2.0 * s.truth.attrs["chamber_radius"]) / p  # (the base between the wells, px: 28)
+    assert off == -off2 and np.all(np.isfinite(t.bounds))
+    np.testing.assert_allclose(np.array(t._nb) - [t.walls0.left, t.walls0.right], [-gap, gap], atol=2.0)
+    ds = _extract(s)
+    sc = score(s.truth, ds)
+    assert list(ds.flag.values) == ["ok", "ok", "touching"] and sc["n_silent"] == 0, ds.flag_figure.values
+    assert np.all(sc["dv_tol"][:2] <= 1.0) and np.all(np.abs(sc["rim_bias_px"]) < 0.5), sc
+    with pytest.raises(ChamberNotFound, match="not one well's"):
+        extract(s.frames, pixel_size=p, frame_interval=600.0, progress=False, tracer="silhouette")
 
 
 def test_a_well_with_one_wall_outside_the_field_is_refused_saying_so():
