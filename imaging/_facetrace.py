@@ -1554,7 +1554,9 @@ class SilhouetteTracer:
         after = loud & (offs[None, :] >= quiet[:, None])
         hit = np.where(after.any(axis=1), offs[np.argmax(after, axis=1)], np.inf)
         hit[merged] = 0.0
-        g = ndimage.median_filter(hit, size=_GAP_ROWS, mode="nearest")
+        # (mirrored at the ends: padded with the end row's own value, a change on the last row alone read as a gap,
+        # drawn_20261207_25: 1 px for 72 px, touching)
+        g = ndimage.median_filter(hit, size=_GAP_ROWS, mode="reflect")
         mid = start + side * 0.5 * np.minimum(g, length)
         mid = np.where(np.isfinite(g), mid, side * np.maximum(side * mid, side * (self.bounds[j] + dx)))
         # (on the first frame's rows; the rows outside the scanned ones keep the half-way column)

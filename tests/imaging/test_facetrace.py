@@ -1446,3 +1446,37 @@ def test_annotations_at_the_words_full_scale_are_not_the_light():
     d = render_look("dark_field", [0.5], shape=SHAPE)
     assert d.truth.attrs["bit_depth"] == 16
     assert dark_background(_stamp(np.asarray(d.frames[0]), 0.0, "tl", d.truth.attrs["pixel_size"], 16))[1] != ""
+
+
+@pytest.mark.parametrize(("loud_rows", "expected"), [(1, None), (10, 2.0), (20, 2.0)])
+def test_a_change_on_the_gap_scans_last_row_alone_is_no_neighbour(loud_rows, expected):
+    """The gap to a neighbour's dome is a running median over _GAP_ROWS rows of each row's gap; its ends were
+    padded with the end rows' own values, so a change 2 px past the face on the last row only (the one nearest the
+    top face) read as a gap of 2 px: measured on drawn_20261207_25 (frame 5, the true gap 72 px, read 1.0: touching,
+    falsely).  Now mirrored at the ends: one row alone reads nothing (the gap: the length scanned), a face over 10
+    rows at the end or 20 in the middle is read."""
+    from types import SimpleNamespace
+
+    from osmobulge.imaging._facetrace import _GAP_REACH
+
+    top, axis, radius = 300.0, 250.0, 100.0
+    phi = np.linspace(0.0, np.pi, 200)
+    u, z = radius * np.cos(phi)[::-1], radius * np.sin(phi)[::-1]  # (left rim -> right rim)
+    w = SimpleNamespace(top_row=top, axis_col=axis)
+    fake = SimpleNamespace(view_shape=(600, 800), _nb=(np.nan, axis + 300.0), bounds=(-np.inf, axis + 200.0),
+                           _clear_of_specks=lambda rows, cols, dx, dy: np.ones(np.broadcast(rows, cols).shape, bool))
+    noise = 0.01
+
+    def sample(points, directions, offsets, own=True):
+        v = np.zeros((len(points), len(offsets)))
+        v[:, 0] = 1.0  # (the face's own change)
+        at_end = loud_rows < 20
+        rows = slice(len(points) - loud_rows, None) if at_end else slice(100, 100 + loud_rows)
+        v[rows, 2] = 1.0  # (a change 2 px past it)
+        return v
+
+    least, _ = SilhouetteTracer._gap_rows(fake, sample, w, u, z, 1.0, 0.0, 0.0, noise)
+    if expected is None:
+        assert least == pytest.approx(_GAP_REACH)  # (nothing seen within the reach)
+    else:
+        assert least == expected
