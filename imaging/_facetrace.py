@@ -1421,22 +1421,51 @@ class SilhouetteTracer:
         for j, (side, b) in enumerate(((-1.0, self.bounds[0]), (1.0, self.bounds[1]))):
             if not np.isfinite(b):
                 continue
-            if self._lim is None:
-                near = float(np.min(side * (b + dx - w.axis_col - u)))
-            else:
-                near = float(np.min(side * (self._limits(w.top_row - z, dy)[j] + dx - w.axis_col - u)))
+            limit = b if self._lim is None else self._limits(w.top_row - z, dy)[j]
+            dist = side * (limit + dx - w.axis_col - u)
+            near = float(np.min(dist))
             if self._lim is None and near > _NEAR_PX and not self._face_on(sample, side, b, rows, dx, dy, noise):
                 gap = min(gap, near)
                 continue
             g, mid = self._gap_rows(sample, w, u, z, side, dx, dy, noise)
-            # (the gap measured; the face at its limits may be cut off there: that distance then)
-            gap = min(gap, g if near >= self.settings.touching_flag else min(g, near))
+            # (the gap measured; the face at its limits may be cut off there: that distance then, unless the water
+            # just beyond it is quiet, :meth:`_cut_at_limit`)
+            close = dist < self.settings.touching_flag
+            if close.any() and self._cut_at_limit(sample, w, u, z, close, noise):
+                gap = min(gap, g, near)
+            else:
+                gap = min(gap, g)
             if lim is None:
                 lim = [np.full(self.view_shape[0], x) for x in self.bounds]
             lim[j] = mid
         if lim is not None:
             self._lim_next = tuple(lim)
         return max(gap, 0.0)
+
+    def _cut_at_limit(self, sample, w, u, z, close, noise):
+        """Whether the dome's outer face may be cut off at its points ``close`` (of its points ``(u, z)``, left
+        rim -> right rim: those at the columns it was searched for between, :meth:`_limits`): a change over 10x
+        the noise beyond any of them along the curve's outward normal, unmasked, from 5 px (the face's own edge
+        fades within 3-4 px) to a film's thickness and 8 px (an edge-only look's inner face taken for the outer
+        one has the outer face that far out): the face going on past the limit, or anything else there, and the
+        frame stays touching.  Quiet water there: the face ends where it was found.
+
+        Measured on drawn_20261207_27 (frame 6): a drifting particle 52 px
+        past the face in frame 5 was taken for the neighbour's dome, the next
+        frame's search limited to the middle of that gap; the dome grew 26 px
+        sideways between the frames, reached the limit and was flagged
+        touching, the water beyond it quiet and the neighbour's dome 50 px off.
+        (Along the normal, not the row: near the dome's top a row runs along
+        the face.)
+        """
+        du, dz = np.gradient(u), np.gradient(z)
+        norm = np.hypot(du, dz)
+        norm[norm == 0.0] = 1.0
+        nu, nz = -dz / norm, du / norm  # (outward: the curve runs left rim -> over the top -> right rim)
+        v = sample(np.column_stack((w.axis_col + u[close], w.top_row - z[close])),
+                   np.column_stack((nu[close], -nz[close])), np.arange(5.0, max(12.0, self.l0 + 8.0) + 0.5),
+                   own=False)
+        return bool(np.any(np.abs(v) > 10.0 * noise))
 
     def _side_gap(self, sample, w, u, z, dx, dy, noise, sides=(0, 1)):
         """How near (px) the dome comes to a dome coming in at the field's side edges ``sides`` (0 left, 1 right:

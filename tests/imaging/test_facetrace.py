@@ -1480,3 +1480,36 @@ def test_a_change_on_the_gap_scans_last_row_alone_is_no_neighbour(loud_rows, exp
         assert least == pytest.approx(_GAP_REACH)  # (nothing seen within the reach)
     else:
         assert least == expected
+
+
+@pytest.mark.parametrize(("beyond", "cut"),
+                         [("quiet", False), ("outer_face_of_edge_look", True), ("band_goes_on", True)])
+def test_a_dome_at_its_search_limit_is_cut_only_if_its_face_goes_on(beyond, cut):
+    """A dome that reaches the columns it was searched for between (half-way to what the last frame took for the
+    neighbour's dome) was flagged touching, its face maybe cut off there.  Measured on drawn_20261207_27 frame 6:
+    a drifting particle 52 px out had set that limit, the dome grew 26 px sideways and reached it, the water
+    beyond quiet (touching, falsely).  The face is taken as cut (touching) only when the change goes on beyond it
+    along its outward normal: its band continuing, or, in an edge-only look whose inner face was taken for the
+    outer one, the outer face a film's thickness further out."""
+    from types import SimpleNamespace
+
+    top, axis, radius, noise = 300.0, 250.0, 100.0, 0.01
+    phi = np.linspace(np.pi, 0.0, 121)  # (left rim -> over the top -> right rim)
+    u, z = radius * np.cos(phi), radius * np.sin(phi)
+    close = (phi > 0.2) & (phi < 0.6)  # (some points on the right flank)
+    w = SimpleNamespace(top_row=top, axis_col=axis)
+
+    def sample(points, directions, offsets, own=True):
+        radial = np.column_stack((points[:, 0] - axis, points[:, 1] - top))  # (view: rows down)
+        radial /= np.hypot(radial[:, 0], radial[:, 1])[:, None]
+        assert np.all(np.sum(radial * directions, axis=1) > 0.99) and not own  # (outward, unmasked)
+        d = np.broadcast_to(offsets, (len(points), len(offsets)))
+        v = 70.0 * noise * np.exp(-0.5 * ((d + 1.0) / 1.5) ** 2)  # (the face's own edge fading)
+        if beyond == "outer_face_of_edge_look":
+            v = v + 50.0 * noise * (np.abs(d - 22.0) < 1.5)
+        elif beyond == "band_goes_on":
+            v = v + 60.0 * noise * (d < 25.0)
+        return v
+
+    fake = SimpleNamespace(l0=22.0)
+    assert SilhouetteTracer._cut_at_limit(fake, sample, w, u, z, close, noise) is cut
