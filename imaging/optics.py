@@ -59,6 +59,7 @@ import math
 from dataclasses import dataclass, fields
 
 import numpy as np
+from numba import njit
 from scipy import ndimage
 
 __all__ = ["Optics", "Hole", "Collapse", "transmission", "optical_path", "render_optical"]
@@ -419,7 +420,49 @@ def _blend_silhouettes(light, cover):
 # the image
 # --------------------------------------------------------------------------------------
 def _splat(shape, rows, cols, weight):
-    """Bilinear splat of weights at fractional (row, col) positions onto a grid."""
+    """Bilinear splat of weights at fractional (row, col) positions onto a grid.
+
+    Compiled (:func:`_splat_corners`): numpy's four ``bincount`` passes over the
+    oversampled grid took 6.7 s of a 1024 x 1024 frame's 11.5 s.  The same sums
+    in the same order, so the same image to the bit (:func:`_splat_numpy`, kept
+    for the test).
+    """
+    shape = (int(shape[0]), int(shape[1]))
+    out = _splat_corners(shape[0], shape[1], np.ascontiguousarray(rows, np.float64).ravel(),
+                         np.ascontiguousarray(cols, np.float64).ravel(), np.ascontiguousarray(weight).ravel())
+    return out.reshape(shape)
+
+
+@njit(cache=True, nogil=True)
+def _splat_corners(n_rows, n_cols, rows, cols, weight):
+    """The four corners' bilinear weights added corner by corner, each corner's sum over the samples in their
+    order added to the grid after the last's (as ``out += np.bincount(...)`` per corner)."""
+    out = np.zeros(n_rows * n_cols)
+    part = np.empty(n_rows * n_cols)
+    for corner in range(4):
+        dr, dc = corner // 2, corner % 2
+        part[:] = 0.0
+        for i in range(rows.size):
+            r0, c0 = np.floor(rows[i]), np.floor(cols[i])
+            fr, fc = rows[i] - r0, cols[i] - c0
+            rr, cc = int(r0) + dr, int(c0) + dc
+            if rr < 0 or rr >= n_rows or cc < 0 or cc >= n_cols:
+                continue
+            if corner == 0:
+                wgt = (1 - fr) * (1 - fc)
+            elif corner == 1:
+                wgt = (1 - fr) * fc
+            elif corner == 2:
+                wgt = fr * (1 - fc)
+            else:
+                wgt = fr * fc
+            part[rr * n_cols + cc] += weight[i] * wgt
+        out += part
+    return out
+
+
+def _splat_numpy(shape, rows, cols, weight):
+    """:func:`_splat` in numpy (the reference its compiled form is tested against)."""
     r0 = np.floor(rows).astype(np.int64)
     c0 = np.floor(cols).astype(np.int64)
     fr, fc = rows - r0, cols - c0

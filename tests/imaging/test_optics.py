@@ -508,3 +508,22 @@ def test_the_exposure_drifts_over_the_series_and_clips_at_full_scale():
         assert np.all(np.abs(s.frames[i][under] - want[under]) <= 0.5 * gain + 0.5 + 1e-6)
         assert np.all(s.frames[i][want > 65535.0 + gain] == 65535)
     assert np.mean(s.frames[2] == 65535) > 0.3 and np.all(plain.frames[2] < 65535)  # (the water clips)
+
+
+@pytest.mark.parametrize("dtype", [np.float64, np.float32])
+def test_the_compiled_splat_is_numpys_to_the_bit(dtype):
+    """The defocus shift's bilinear splat is compiled (it took 6.7 of a frame's 11.5 s); it adds the same sums
+    in the same order as numpy's four bincounts, so the renders (and every figure measured on them) are
+    unchanged: equal to the bit, samples moved by up to ~10 px, some off the grid."""
+    from osmobulge.imaging.optics import _splat, _splat_numpy
+
+    rng = np.random.default_rng(3)
+    shape = (150, 170)
+    rr, cc = np.mgrid[0 : shape[0], 0 : shape[1]].astype(float)
+    shift = np.where(rng.random(shape) < 0.2, rng.normal(0.0, 3.0, shape), 0.0)
+    rows, cols = rr + shift, cc - 0.7 * shift
+    weight = rng.random(shape).astype(dtype)
+    got, ref = _splat(shape, rows, cols, weight), _splat_numpy(shape, rows, cols, weight)
+    assert np.any((rows < 0) | (rows > shape[0] - 1))  # (some samples land off the grid)
+    assert np.array_equal(got, ref)
+    assert got.sum() == pytest.approx(ref.sum()) and got.sum() < weight.sum()  # (those are lost)
