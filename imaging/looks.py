@@ -358,8 +358,12 @@ DRAWN_BATCHES = {
     # 32-39, measured once at the end of that stop: 70 of 72 ok, 0 silent, worst 0.42 of the tolerance, rims within
     # 0.24 px, lambda_pre within 0.21 %; look 32 frame 1 least_bend (a particle at the dome's flank, 1.24x the
     # tolerance off), frame 8 touching with the domes 7.5 px apart (the dome crossed the half-way column between two
-    # frames 32 px from it and was cut there: 1.14x off, flagged)
-    20261207: 40,
+    # frames 32 px from it and was cut there: 1.14x off, flagged).  Looks 40-47, measured once right after: 67 of 72
+    # read ok, the truth's 5 touching frames flagged (no other flag), worst 0.72 of the tolerance; 2 of the 67
+    # SILENT, look 45 frames 2 and 5: rims 0.50 and 0.76 px small (volumes 0.10 and 0.12 of the tolerance,
+    # lambda_pre -0.12 and -0.22 %): a bright look (0.95 of full scale) with exposure jitter and stray light, 88 and
+    # 93 % of the pixels clipped (clipped_share 0.25, 0.26; frames 6-8 clipped 55-78 % read within 0.45 px)
+    20261207: 48,
 }
 
 
