@@ -1347,6 +1347,34 @@ def test_a_dome_that_reads_flat_after_a_dome_is_flagged(edge_dark):
     assert np.all(sc["dv_tol"][:2] <= 1.0), sc["dv_tol"]
 
 
+def test_a_dome_not_seen_under_added_light_is_not_read_flat():
+    """A frame without a dome edge reads flat only while its film's faces over the well keep their contrast (as
+    those beside the well keep it).  ho_blind_1206e (a dim 10-bit look, vignetting, Poisson noise), a flat frame
+    and a dome at Vtilde 1, with light added since the first frame: at 3x the first frame's median light the
+    gain divided out left the dome's contrast 7.9x the noise, no edge was found, and the flat test (the change
+    under 10x the noise) read it flat and ok, 33x the tolerance (the code before; stray light 4-29x a held-out
+    look's own light did the same to 8 frames).  Its faces over the well keep 0.05 of their contrast; the flat
+    frame's keep 0.23, as beside the well: too little of the faces' contrast is left to tell flat from gone, so
+    both are flagged (not ok).  With the light doubled both read ok, and unchanged too."""
+    s = render_look("ho_blind_1206e", [0.0, 0.0, 1.0], shape=(700, 900), lambda_pre=PRE)
+    frames = np.asarray(s.frames).astype(float)
+    light = np.median(frames[0])
+    for added, ok in ((0.0, True), (1.0, True), (3.0, False)):
+        relit = frames.copy()
+        relit[1:] += added * light
+        ds = extract(np.rint(relit).astype(np.uint16), pixel_size=s.truth.attrs["pixel_size"],
+                     chamber=_chamber(s.truth), progress=False, frame_interval=600.0)
+        sc = score(s.truth, ds)
+        assert sc["n_silent"] == 0, (added, list(ds.flag.values), sc["dv_tol"])
+        if ok:
+            assert list(ds.flag.values) == ["ok"] * 3, (added, list(ds.flag.values))
+            assert np.all(sc["dv_tol"] < 0.5), sc["dv_tol"]
+        else:
+            assert list(ds.flag.values) == ["ok", "poor_fit", "poor_fit"]
+            assert list(ds.flag_figure.values[1:]) == ["dome_contrast"] * 2
+            assert all("faces over the well keep" in m for m in ds.message.values[1:])
+
+
 def test_auto_refuses_a_band_off_the_chamber_when_the_walls_are_not_found(monkeypatch):
     """When the silhouette route cannot find the chamber and the band route's rim lies more than ROUTE_RIM_TOL
     off the chamber's radius, auto refuses (the band is not this chamber's well) instead of keeping the band."""
