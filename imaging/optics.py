@@ -401,18 +401,34 @@ def _crossing(sel, radius, x, du):
     return sel[k], f[k], np.sign(x[k])
 
 
-def _blend_silhouettes(light, cover):
+def _blend_silhouettes(light, cover, axis=1, sign=1):
     """The samples a silhouette crosses: their inside share takes the first sample inside, the rest the
-    first outside (point samples would put the edge at the nearer sample boundary)."""
+    first outside (point samples would put the edge at the nearer sample boundary).
+
+    ``axis``, ``sign``: the grid's axis the scene's ``u`` (along the rim line)
+    changes most along, and the sign of that change: a silhouette's outside
+    (``side`` +-1 in ``u``) is ``side * sign`` samples along it.  An upright
+    view's ``u`` grows along the columns (1, +1); a view turned over runs it
+    back (1, -1), one turned a quarter along the rows (0, +-1).  Stepping
+    along the columns in every view (the code before) took each crossed
+    sample's inside and outside the wrong way round in a view turned over:
+    its walls' edges moved up to a sample (measured: a flat frame's rim read
+    0.30 px small at one phase of the grid, right at others), and in a view
+    turned a quarter along the silhouette, not across it.
+    """
     out = light.copy()
+    n = light.shape[axis]
     for idx, f, side in cover:
         if idx.size == 0:
             continue
         rr, cc = np.unravel_index(idx, light.shape)
-        step = side.astype(int)  # outwards along the columns
-        c_out = np.clip(cc + step, 0, light.shape[1] - 1)
-        c_in = np.clip(cc - step, 0, light.shape[1] - 1)
-        out[rr, cc] = (1.0 - f) * light[rr, c_out] + f * light[rr, c_in]
+        step = (side * sign).astype(int)  # outwards
+        if axis == 1:
+            c_out, c_in = np.clip(cc + step, 0, n - 1), np.clip(cc - step, 0, n - 1)
+            out[rr, cc] = (1.0 - f) * light[rr, c_out] + f * light[rr, c_in]
+        else:
+            r_out, r_in = np.clip(rr + step, 0, n - 1), np.clip(rr - step, 0, n - 1)
+            out[rr, cc] = (1.0 - f) * light[r_out, cc] + f * light[r_in, cc]
     return out
 
 
@@ -525,7 +541,9 @@ def render_optical(shape, to_scene, chambers, a, h, l0, pixel_size, optics: Opti
     g_u = _minmod_gradient(opd, q, 1 - ax_w)
     g_row, g_col = (g_w, g_u) if ax_w == 0 else (g_u, g_w)
     theta = np.hypot(g_row, g_col)
-    light = _blend_silhouettes(transmission(theta, optics), cover)
+    du = (u[1, 0] - u[0, 0], u[0, 1] - u[0, 0])  # (u's change a sample down the rows, along the columns)
+    ax_u = 1 if abs(du[1]) >= abs(du[0]) else 0
+    light = _blend_silhouettes(transmission(theta, optics), cover, ax_u, 1 if du[ax_u] > 0 else -1)
     absorb = optics.absorption_film * p_film + optics.absorption_base * p_base + optics.absorption_liquid * p_liq
     if np.any(absorb):
         light = light * np.exp(-absorb)

@@ -527,3 +527,37 @@ def test_the_compiled_splat_is_numpys_to_the_bit(dtype):
     assert np.any((rows < 0) | (rows > shape[0] - 1))  # (some samples land off the grid)
     assert np.array_equal(got, ref)
     assert got.sum() == pytest.approx(ref.sum()) and got.sum() < weight.sum()  # (those are lost)
+
+
+@pytest.mark.parametrize("axis_col", [40.0, 40.17, 40.5])
+def test_a_view_turned_over_or_a_quarter_is_the_upright_one_mirrored_or_transposed(axis_col):
+    """The walls' and the dome's silhouettes blend each crossed sample's inside and outside light along the
+    grid's axis the scene's u runs along, its way: a view turned over (u running back along the columns) renders
+    the upright one mirrored, a view turned a quarter (u along the rows) its transpose, to float precision.
+    Stepping along the columns in every view (the code before) swapped the crossed samples' inside and outside
+    in the view turned over, the walls' edges up to a sample off (a flat frame's rim read 0.30 px small on
+    drawn_20261207_26, a view turned over, at one phase of the grid; right at others)."""
+    from osmobulge.imaging.optics import render_optical
+
+    p, a, h, l0 = 1e-6, 20e-6, 15e-6, 4e-6
+    rows, cols = 50, 80
+    rho = np.linspace(0.0, 1.0, 41)
+    flat = (0.0, rho, np.zeros_like(rho), np.ones_like(rho), 1.0)
+    dome = (0.0, rho, 0.5 * (1.0 - rho**2), np.ones_like(rho), 1.02)
+    optics = Optics(oversample=3, defocus=2e-6, halo_strength=0.3)
+
+    def upright(c, r):
+        return (np.asarray(c) - axis_col) * p, -(np.asarray(r) - 30.0) * p
+
+    def over(c, r):  # (the same scene, its u running back along the columns)
+        return upright(cols - 1.0 - np.asarray(c), r)
+
+    def quarter(c, r):  # (u along the rows)
+        return upright(r, c)
+
+    for chamber in (flat, dome):
+        up = render_optical((rows, cols), upright, [chamber], a, h, l0, p, optics)
+        turned = render_optical((rows, cols), over, [chamber], a, h, l0, p, optics)
+        np.testing.assert_allclose(turned[:, ::-1], up, atol=2e-6)
+        np.testing.assert_allclose(render_optical((cols, rows), quarter, [chamber], a, h, l0, p, optics).T, up,
+                                   atol=2e-6)
