@@ -469,7 +469,10 @@ def _wells_between(col_score, width, min_width, outer):
     cols = _zone_peaks(col_score)
     sides = [_wall_side(col_score, c) for c in cols]
     inside = [s for c, s in zip(cols, sides, strict=True) if outer[0] + _RADIUS_GAP < c < outer[1] - _RADIUS_GAP]
-    if not any(a == 1 and -1 in inside[i + 1:] for i, a in enumerate(inside)):
+    base_between = any(a == 1 and -1 in inside[i + 1:] for i, a in enumerate(inside))
+    # (or two zones or more between them whose sides are not known: a wall's zone alike on both sides, as
+    # drawn_20261207_23's, is any wall's; one well has none between its walls)
+    if not base_between and not (len(inside) >= 2 and 0 in inside):
         return None
     return _central_pair(cols, sides, width, lambda cl, cr: cr - cl >= min_width)
 
