@@ -461,13 +461,19 @@ def render_look(name, vtilde, *, shape=(1024, 1024), **kwargs) -> SyntheticSerie
     return series
 
 
+#: issue 16's tolerance of the pre-stretch ``lambda_pre`` (relative) a frame must keep to (:func:`score`)
+LAMBDA_TOL = 0.003
+
+
 def score(truth, ds) -> dict:
     """Per-frame errors of an extraction against the truth of its rendered series.
 
     Tolerances are issue 16's: a frame's volume is right within
-    ``max(3 %, a 0.5 px layer over the rim disc)``, its rim radius within 0.5 px.
-    A *silent error* is a frame flagged ``ok`` whose volume or rim radius is
-    outside those.  Frames the truth marks as an event (``flag`` not ``ok``:
+    ``max(3 %, a 0.5 px layer over the rim disc)``, its rim radius within 0.5 px,
+    its pre-stretch ``lambda_pre`` within 0.3 % (:data:`LAMBDA_TOL`; the rim
+    over the flat frame's, so a 100 px rim must keep within 0.3 px of where
+    the flat frame's put it).  A *silent error* is a frame flagged ``ok``
+    outside any of those.  Frames the truth marks as an event (``flag`` not ``ok``:
     the renderer's domes touching a neighbour's, their bands overlapping) are
     not counted in ``frac_volume_ok``: no volume is right there, the frame
     should be flagged.
@@ -492,7 +498,7 @@ def score(truth, ds) -> dict:
     bias = (ds["rim_radius"].values - r_true) / p
     lam_err = ds["lambda_pre"].values / truth["lambda_pre"].values - 1.0
     flagged = ds["flag"].values.astype(str) != "ok"
-    bad = ~(dv <= 1.0) | ~(np.abs(bias) <= 0.5)
+    bad = ~(dv <= 1.0) | ~(np.abs(bias) <= 0.5) | ~(np.abs(lam_err) <= LAMBDA_TOL)
     silent = ~flagged & bad
     okv = np.where(flagged, np.nan, dv)
     event = truth["flag"].values.astype(str) != "ok" if "flag" in truth else np.zeros(v_true.shape, bool)
