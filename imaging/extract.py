@@ -554,7 +554,12 @@ def _tracers(first, bulge_direction, chamber_region, settings, route="band", cha
 
             own = copy.deepcopy(band).process(first, 0)
             off = _rim_off(band.ref.rim_radius, chamber, p)
-            if own.flag != "ok" or off > ROUTE_RIM_TOL:
+            # without the chamber, the band's rim is checked against the walls' (measured on the 100 cached looks
+            # read without the chamber: the band route took a band not the well's film on 8, its rim 11-72 % off
+            # and frames ok and wrong, 3-9 of 9; the silhouette route's rims within 0.3 px of the truth on all 10
+            # tried, the painted looks' too)
+            unchecked = chamber is None and own.flag == "ok"
+            if own.flag != "ok" or off > ROUTE_RIM_TOL or unchecked:
                 try:
                     sil = _silhouette_tracer(first, bulge_direction, settings, chamber, p)
                 except ChamberNotFound as err:  # the band route it is: its frames are flagged (and a bulged
@@ -573,7 +578,15 @@ def _tracers(first, bulge_direction, chamber_region, settings, route="band", cha
                             f"chamber's (radius {float(chamber.radius) * 1e6:.1f} um, more than "
                             f"{100 * ROUTE_RIM_TOL:.0f} % off), and the silhouette route: {err}") from err
                 else:
-                    if own.flag != "ok" or _rim_off(sil.ref.rim_radius, chamber, p) <= ROUTE_RIM_TOL:
+                    if unchecked:
+                        apart = abs(band.ref.rim_radius / sil.ref.rim_radius - 1.0)
+                        if apart > ROUTE_RIM_TOL:
+                            warnings.warn(f"the band route's rim ({band.ref.rim_radius:.1f} px) lies "
+                                          f"{100 * apart:.0f} % off the walls' ({sil.ref.rim_radius:.1f} px): its "
+                                          f"band is not this well's film; the silhouette route is taken (pass the "
+                                          f"chamber to check either against it)", UserWarning, stacklevel=3)
+                            return [sil]
+                    elif own.flag != "ok" or _rim_off(sil.ref.rim_radius, chamber, p) <= ROUTE_RIM_TOL:
                         return [sil]
         return [band]
     central = ChamberTracer(first, bulge_direction=bulge_direction, settings=settings)

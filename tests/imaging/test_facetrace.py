@@ -492,7 +492,10 @@ def test_a_band_off_the_chambers_rim_is_not_this_chamber():
     lies 45 % inside the well's (88 px against 160) and reads its own flat frame ok; measured blind, auto kept it
     and read every frame flat, flagged ok.  With the chamber given, auto checks the band's rim against its radius
     (ROUTE_RIM_TOL) and takes the silhouette route, whose rim is the well's: every frame ok and within the
-    tolerances.  Without a chamber the band is kept and its flat reading warned about."""
+    tolerances.  Without a chamber the band was kept and its flat reading warned about (measured on the 100
+    cached looks read without a chamber: the band route took a band not the well's film on 8, 3-9 of 9 frames ok
+    and wrong); now its rim is checked against the walls' (the silhouette route's) and the silhouette route taken,
+    with a warning, when they lie more than ROUTE_RIM_TOL apart: the same reading as with the chamber."""
     from osmobulge.imaging.extract import ROUTE_RIM_TOL
     from osmobulge.imaging.trace import ChamberTracer
 
@@ -506,11 +509,16 @@ def test_a_band_off_the_chambers_rim_is_not_this_chamber():
     assert ds.attrs["tracer"] == "silhouette"
     assert list(ds.flag.values) == ["ok"] * 3 and sc["n_silent"] == 0 and sc["worst_dv_tol"] <= 1.0
     assert np.all(np.abs(sc["rim_bias_px"]) <= 0.5)
-    # without a chamber there is no radius to check the band against: the band is kept, and its flat reading of
-    # every later frame is warned about, not passed in silence
-    with pytest.warns(UserWarning, match="the band route read no dome"):
+    # without a chamber the band's rim is checked against the walls'
+    with pytest.warns(UserWarning, match=r"the band route's rim \(\d+\.\d px\) lies \d+ % off the walls'"):
         free = extract(s.frames, pixel_size=p, progress=False, frame_interval=600.0)
-    assert free.attrs["tracer"] == "band"
+    assert free.attrs["tracer"] == "silhouette"
+    sc = score(s.truth, free)
+    assert list(free.flag.values) == ["ok"] * 3 and sc["n_silent"] == 0 and sc["worst_dv_tol"] <= 1.0
+    # a band that is the well's film (painted_band: the band and the walls agree) is kept
+    painted = render_look("painted_band", [0.0, 1.0], shape=(700, 900), lambda_pre=PRE)
+    assert _extract(painted).attrs["tracer"] == extract(painted.frames, pixel_size=painted.truth.attrs["pixel_size"],
+                                                         progress=False, frame_interval=600.0).attrs["tracer"] == "band"
 
 
 def test_dark_field_is_refused_not_measured():
