@@ -555,7 +555,7 @@ def _tracers(first, bulge_direction, chamber_region, settings, route="band", cha
             own = copy.deepcopy(band).process(first, 0)
             off = _rim_off(band.ref.rim_radius, chamber, p)
             # without the chamber, the band's rim is checked against the walls' (measured on the 100 cached looks
-            # read without the chamber: the band route took a band not the well's film on 8, its rim 11-72 % off
+            # read without the chamber: the band route took a band not the well's film on 8, its rim 10-72 % off
             # and frames ok and wrong, 3-9 of 9; the silhouette route's rims within 0.3 px of the truth on all 10
             # tried, the painted looks' too)
             unchecked = chamber is None and own.flag == "ok"
