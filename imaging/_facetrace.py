@@ -194,6 +194,8 @@ _TILT_BINS, _TILT_NOISE = 16, 1.25
 #: a frame without a dome edge is flat only while its film's faces over the well keep over this share of the
 #: contrast the film's faces beside the well keep since the first frame (:meth:`SilhouetteTracer._flat_or_gone`)
 _FACES_KEPT = 0.5
+#: the gap (px) beside which rows with none seen are rows where the faces met (:meth:`SilhouetteTracer._gap_rows`)
+_GAP_CLOSED = 2.0
 #: how far (px) from the last ok frame's dome the light's plane is not fitted (:meth:`_near_last_dome`)
 _DOME_ZONE_PX = 40.0
 #: the light's change over the walls' crop is fitted on every _LIGHT_ROWS-th row of it
@@ -1586,6 +1588,14 @@ class SilhouetteTracer:
         after = loud & (offs[None, :] >= quiet[:, None])
         hit = np.where(after.any(axis=1), offs[np.argmax(after, axis=1)], np.inf)
         hit[merged] = 0.0
+        # (the face at the half-way column and a gap closing to _GAP_CLOSED px beside rows with none: the
+        # neighbour's face met the outer face there and its change was taken for the face's own; drawn_20261207_44,
+        # its domes overlapping, read 7 px, ok)
+        if np.any(side * (self.bounds[j] + dx - start) <= 1.0):
+            closed = np.isinf(hit) & (ndimage.minimum_filter1d(hit, 3) <= _GAP_CLOSED)
+            while np.any(closed):
+                hit[closed] = 0.0
+                closed = np.isinf(hit) & (ndimage.minimum_filter1d(hit, 3) <= 0.0)
         # (mirrored at the ends: padded with the end row's own value, a change on the last row alone read as a gap,
         # drawn_20261207_25: 1 px for 72 px, touching)
         g = ndimage.median_filter(hit, size=_GAP_ROWS, mode="reflect")

@@ -372,7 +372,8 @@ DRAWN_BATCHES = {
     # measured again): 477 of 504 frames ok, 2 silent (look 45's clipped rims), worst lambda_pre 0.22 %, rims
     # within 0.28 px but look 45's, worst 0.87 of the tolerance; 20 of the truth's 21 touching frames flagged:
     # look 44's last (turned a quarter, the domes overlapping) reads ok, its gap 7 px, its volume 0.28 of the
-    # tolerance (flagged touching with the blend as before)
+    # tolerance (flagged touching with the blend as before; flagged touching again since the gap closing where the
+    # faces meet at the half-way column, _facetrace._GAP_CLOSED)
     20261207: 56,
 }
 

@@ -1523,6 +1523,34 @@ def test_a_change_on_the_gap_scans_last_row_alone_is_no_neighbour(loud_rows, exp
         assert least == expected
 
 
+@pytest.mark.parametrize(("bound", "touching"), [(100.5, True), (200.0, False)])
+def test_a_gap_closing_where_the_face_meets_the_half_way_column_is_closed(bound, touching):
+    """drawn_20261207_44 (turned a quarter since the renderer's blend fix), its domes overlapping in the last
+    frame: the neighbour's face came 12, 11, ... 1 px near the outer face over 12 rows, then met it, and on the
+    rows where they met its change was taken for the face's own, no gap seen (inf); the running median took 7 px
+    from the rows beside, ok.  With the face at the half-way column (within 1 px), rows with no gap next to a
+    gap of 2 px or less are rows where the faces met: 0, touching.  With the face far from it, as before."""
+    from types import SimpleNamespace
+
+    top, axis, radius = 300.0, 250.0, 100.0
+    phi = np.linspace(0.0, np.pi, 200)
+    u, z = radius * np.cos(phi)[::-1], radius * np.sin(phi)[::-1]  # (left rim -> right rim)
+    w = SimpleNamespace(top_row=top, axis_col=axis)
+    fake = SimpleNamespace(view_shape=(600, 800), _nb=(np.nan, axis + 300.0), bounds=(-np.inf, axis + bound),
+                           _clear_of_specks=lambda rows, cols, dx, dy: np.ones(np.broadcast(rows, cols).shape, bool))
+
+    def sample(points, directions, offsets, own=True):
+        v = np.zeros((len(points), len(offsets)))
+        i0 = len(points) // 2 - 10
+        for k in range(12):  # (the neighbour's face nearing)
+            v[i0 + k, 12 - k] = 1.0
+        v[i0 + 12 : i0 + 20, :3] = 1.0  # (met: its change from the face on)
+        return v
+
+    least, _ = SilhouetteTracer._gap_rows(fake, sample, w, u, z, 1.0, 0.0, 0.0, 0.01)
+    assert (least < TraceSettings().touching_flag) == touching, least
+
+
 @pytest.mark.parametrize(("beyond", "cut"),
                          [("quiet", False), ("outer_face_of_edge_look", True), ("band_goes_on", True)])
 def test_a_dome_at_its_search_limit_is_cut_only_if_its_face_goes_on(beyond, cut):
