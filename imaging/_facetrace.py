@@ -1592,10 +1592,10 @@ class SilhouetteTracer:
         # neighbour's face met the outer face there and its change was taken for the face's own; drawn_20261207_44,
         # its domes overlapping, read 7 px, ok)
         if np.any(side * (self.bounds[j] + dx - start) <= 1.0):
-            closed = np.isinf(hit) & (ndimage.minimum_filter1d(hit, 3) <= _GAP_CLOSED)
-            while np.any(closed):
-                hit[closed] = 0.0
-                closed = np.isinf(hit) & (ndimage.minimum_filter1d(hit, 3) <= 0.0)
+            runs, _ = ndimage.label(np.isinf(hit))  # (each run of rows with no gap seen)
+            beside = ndimage.minimum_filter1d(hit, 3) <= _GAP_CLOSED  # (next to a gap that closed)
+            met = np.unique(runs[beside & (runs > 0)])
+            hit[np.isin(runs, met)] = 0.0
         # (mirrored at the ends: padded with the end row's own value, a change on the last row alone read as a gap,
         # drawn_20261207_25: 1 px for 72 px, touching)
         g = ndimage.median_filter(hit, size=_GAP_ROWS, mode="reflect")
@@ -1870,12 +1870,12 @@ class SilhouetteTracer:
                    np.arange(0.0, r1 - r0, 0.5))
         moved = float(np.median(np.max(np.abs(v), axis=1)))
         out.figures["dome_contrast"] = out.figures.get("dome_contrast", 0.0)
-        over, beside = self._faces_kept(sample, w, out.drift)
-        kept = over / max(beside, _FACES_KEPT) if np.isfinite(beside) else over  # (beside: none seen in the view)
         if moved > 10.0 * noise:  # the film's faces changed but no dome rose: no membrane over the well
             out.message = "no dome edge, and the flat film's faces over the well are gone"
             out.flag, out.flag_figure, out.flag_value = "no_membrane", "dome_contrast", out.figures["dome_contrast"]
             return out
+        over, beside = self._faces_kept(sample, w, out.drift)
+        kept = over / max(beside, _FACES_KEPT) if np.isfinite(beside) else over  # (beside: none seen in the view)
         if kept < _FACES_KEPT:  # (faint against this frame's noise, but gone)
             out.message = (f"no dome edge found (its contrast {out.figures['dome_contrast']:.1f}x the noise), but "
                            f"the flat film's faces over the well keep {over:.2f} of their first frame's contrast "
