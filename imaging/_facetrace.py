@@ -1580,11 +1580,15 @@ class SilhouetteTracer:
         offs = np.arange(0.0, max(float(length.max()), 1.0), 1.0)
         v = sample(np.column_stack((start, rows)), np.tile([side, 0.0], (rows.size, 1)), offs, own=False)
         loud = np.abs(v) > 10.0 * noise
-        loud &= self._clear_of_specks(rows[:, None], start[:, None] + side * offs[None, :], dx, dy)
+        clear = self._clear_of_specks(rows[:, None], start[:, None] + side * offs[None, :], dx, dy)
         inside = offs[None, :] < length[:, None]
-        loud &= inside
-        quiet = np.argmax(~loud, axis=1)  # (past the face's own change)
-        merged = ~np.any(~loud & inside, axis=1)  # (no water before the neighbour's wall)
+        # (a sample on a speck is neither loud nor quiet: it does not end the face's own change; taken for quiet,
+        # the face's change just past it read as the neighbour's, a gap of 1 px on one row: ho_blind_1206k's frame
+        # 7, 10.5 px apart, touching through the rows closed beside it)
+        calm = (~loud & clear) | ~inside
+        loud &= clear & inside
+        quiet = np.argmax(calm, axis=1)  # (past the face's own change)
+        merged = ~np.any(calm & inside, axis=1) & np.any(loud, axis=1)  # (no water before the neighbour's wall)
         after = loud & (offs[None, :] >= quiet[:, None])
         hit = np.where(after.any(axis=1), offs[np.argmax(after, axis=1)], np.inf)
         hit[merged] = 0.0

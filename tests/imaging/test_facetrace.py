@@ -1551,6 +1551,42 @@ def test_a_gap_closing_where_the_face_meets_the_half_way_column_is_closed(bound,
     assert (least < TraceSettings().touching_flag) == touching, least
 
 
+@pytest.mark.parametrize("speck", [False, True])
+def test_a_speck_on_the_face_does_not_end_the_faces_own_change(speck):
+    """ho_blind_1206k frame 7 (the neighbour 10.5 px away, read 9 px): on one row the scan's first sample lay on a
+    speck of the flat frame and counted as quiet water, so the face's own change just past it was taken for the
+    neighbour's, a gap of 1 px; with the face at the half-way column the rows with no gap seen beside it were
+    closed (0) and the frame flagged touching.  A sample on a speck is neither loud nor quiet: the face's own
+    change goes on through it."""
+    from types import SimpleNamespace
+
+    top, axis, radius = 300.0, 250.0, 100.0
+    phi = np.linspace(0.0, np.pi, 200)
+    u, z = radius * np.cos(phi)[::-1], radius * np.sin(phi)[::-1]  # (left rim -> right rim)
+    w = SimpleNamespace(top_row=top, axis_col=axis)
+    row_speck = {}
+
+    def clear(rows, cols, dx, dy):
+        out = np.ones(np.broadcast(rows, cols).shape, bool)
+        if speck:
+            i = out.shape[0] // 2
+            out[i, 0] = False  # (the first sample of one row on a speck)
+            row_speck["row"] = i
+        return out
+
+    fake = SimpleNamespace(view_shape=(600, 800), _nb=(np.nan, axis + 300.0), bounds=(-np.inf, axis + 100.5),
+                           _clear_of_specks=clear)
+
+    def sample(points, directions, offsets, own=True):
+        v = np.zeros((len(points), len(offsets)))
+        v[:, :3] = 1.0  # (the face's own change, 3 px past its outermost column on every row; no neighbour)
+        return v
+
+    least, _ = SilhouetteTracer._gap_rows(fake, sample, w, u, z, 1.0, 0.0, 0.0, 0.01)
+    assert least > 40.0, least  # (nothing seen up to the reach or the neighbour's wall)
+    assert not speck or row_speck
+
+
 @pytest.mark.parametrize(("beyond", "cut"),
                          [("quiet", False), ("outer_face_of_edge_look", True), ("band_goes_on", True)])
 def test_a_dome_at_its_search_limit_is_cut_only_if_its_face_goes_on(beyond, cut):
