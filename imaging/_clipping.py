@@ -28,8 +28,8 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["FULL_SCALES", "BRIGHTER", "MOVED_FLAG", "clip_mask", "clip_message", "clipped_share", "raised",
-           "wall_clipping"]
+__all__ = ["FULL_SCALES", "BRIGHTER", "MOVED_FLAG", "clip_level", "clip_mask", "clip_message", "clipped_share",
+           "raised", "wall_clipping"]
 
 #: the values a camera's or a file's full scale takes: 8, 10, 12, 14 and 16 bits, and 1.0 (floats scaled to 1)
 FULL_SCALES = (1.0, 255.0, 1023.0, 4095.0, 16383.0, 65535.0)
@@ -49,6 +49,13 @@ WALL_ROWS = (0.06, 0.92)
 
 #: the columns each side of a wall read, px from it (the levels either side of its edge)
 WALL_REACH = (2.0, 12.0)
+
+
+def clip_level(values):
+    """The camera's clip level in ``values``: their largest value when it is a full scale (:data:`FULL_SCALES`
+    or the integer dtype's largest) held by at least :data:`MIN_PILE` of them, else None."""
+    mask = clip_mask(values)
+    return None if mask is None else np.asarray(values)[mask][0]
 
 
 def clip_mask(values):

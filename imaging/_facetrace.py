@@ -60,7 +60,7 @@ from numba import njit
 from scipy import ndimage
 
 from osmobulge.imaging._chamber import ROTATIONS, ChamberGeometry, ChamberNotFound, FrameView, Line, Well
-from osmobulge.imaging._clipping import clip_mask
+from osmobulge.imaging._clipping import clip_level, clip_mask
 from osmobulge.imaging._kernels import (
     change_transects,
     longest_run,
@@ -191,6 +191,11 @@ _GAIN_TOL = 0.05
 #: a plane fitted to the water's change (:func:`_light_plane`, on ``_TILT_BINS`` bins of columns a noise row)
 #: divided out of the change when it raised the noise more than ``_TILT_NOISE`` times
 _TILT_BINS, _TILT_NOISE = 16, 1.25
+#: in a frame whose base's rows (its light's gain read on them) hold clipped light, the plane through the water's
+#: change is also divided out when its level over the water, and the change of the rows highest above the top face,
+#: stand more than _LEVEL_NOISE times the noise off 0 (a change of the whole view's light the base's gain did not
+#: take off, which the noise, a MAD, does not see: :meth:`SilhouetteTracer._noise`)
+_LEVEL_NOISE = 2.0
 #: a frame without a dome edge is flat only while its film's faces over the well keep over this share of the
 #: contrast the film's faces beside the well keep since the first frame (:meth:`SilhouetteTracer._flat_or_gone`)
 _FACES_KEPT = 0.5
@@ -1315,7 +1320,9 @@ class SilhouetteTracer:
                     v[(cols < lo + dx) | (cols > hi + dx)] = 0.0
             return v
 
-        noise, tilt, out.figures["light_tilt"] = self._noise(sample, w)
+        # (the base's rows clipped: their gain is a bound, the water's light may have changed by more)
+        clipped_base = clip_level(raw[slice(*self._reg_rows)]) is not None
+        noise, tilt, out.figures["light_tilt"] = self._noise(sample, w, clipped_base)
         u = z = None
         if self._track is not None:  # along the normals of the last frame's outer face
             u, z, figs = self._tracked(sample, w, noise)
@@ -1620,7 +1627,7 @@ class SilhouetteTracer:
         return change_transects(frame, self.k, self._flat, self._bg, points, directions, offsets, (dx, dy),
                                 _SMOOTH / step)
 
-    def _noise(self, sample, w):
+    def _noise(self, sample, w, clipped_base=False):
         """Noise of the change in the water above the top face (scaled MAD over ``_NOISE_ROWS`` horizontal
         transects across the view, sampled every ``_NOISE_STEP`` px, every other one from half a px on; the
         dome, a minority of the samples, included), at most ``_NOISE_TOP_FACTOR`` times that of the
@@ -1636,7 +1643,12 @@ class SilhouetteTracer:
         frame whose light did not change reads as before).  Measured: a tilt of
         +-10 % at the field's sides by the last of 9 frames raised the noise
         of the halo look from 0.010 to 0.075, and frames 6-8 of 6 of the 12
-        presets read no dome (``dome_contrast``).
+        presets read no dome (``dome_contrast``).  With ``clipped_base`` (the
+        base's rows, whose light's gain was read, hold light the camera
+        clipped), the plane is also taken off when its level over the water
+        and the change of the rows highest above the top face stand over
+        ``_LEVEL_NOISE`` times the noise off 0 (the noise, a MAD, does not
+        see a level).
         """
         rows = np.linspace(2.0, max(w.top_row - 5.0, 10.0), _NOISE_ROWS)
         starts = 0.5 * (np.arange(_NOISE_ROWS) % 2)  # (columns)
@@ -1652,11 +1664,20 @@ class SilhouetteTracer:
         if plane is None:
             return raw, None, 0.0
         tilt = float(abs(plane[1]) * self.view_shape[1] + abs(plane[2]) * self.view_shape[0])
-        if tilt <= 2.0 * raw:  # (a spread of range T adds T**2 / 12 to the variance: 1.15x the noise at T = 2 noise)
+        # (the plane's level over the water: a change of the whole view's light the base's gain did not take off,
+        # its rows clipped; the noise, a MAD, does not see it: drawn_20261207_62,
+        # its exposure up 39 % and its base clipped, read a gain of 1.04-1.08 for 1.10-1.39 and the water 9-14x
+        # the noise brighter than the first frame, taken for a neighbour's dome: touching)
+        level = float(plane[0] + plane[1] * np.mean(at) + plane[2] * np.mean(rows))
+        top = float(np.median(v[:_NOISE_TOP_ROWS]))  # (the rows highest above the top face: a dome's inside, a dyed
+        # liquid over most of the rows, is not a change of the light: ho_blind_1206e)
+        shifted = clipped_base and min(abs(level), abs(top)) > _LEVEL_NOISE * raw and level * top > 0.0
+        if tilt <= 2.0 * raw and not shifted:  # (a spread of range T adds T**2 / 12 to the variance: 1.15x the
+            # noise at T = 2 noise)
             return raw, None, tilt
         grid = plane[0] + plane[1] * at + plane[2] * rows[:, None]
         flat = noise((v - grid) / (1.0 + grid))
-        return (flat, plane, tilt) if raw > _TILT_NOISE * flat else (raw, None, tilt)
+        return (flat, plane, tilt) if shifted or raw > _TILT_NOISE * flat else (raw, None, tilt)
 
     def _near_last_dome(self, w, rows, cols):
         """Which of the samples at view ``rows`` (one a row of ``cols``) lie within ``_DOME_ZONE_PX`` of the last ok

@@ -902,6 +902,52 @@ def test_the_noise_is_the_changes_spread_over_the_water(edge_dark):
     assert 0.42 < got / (np.sqrt(2) * read) < 0.66
 
 
+def test_a_change_of_the_whole_views_light_is_taken_off_the_change(edge_dark):
+    """The light of the whole view changed by 15 % more than the base's gain took off (its rows clipped): the
+    water's change stands 0.15 off 0, 14x the noise, which the noise, a MAD, does not see, and every sample of the
+    water reads as a change over 10x the noise.  When the base's rows hold clipped light, the plane through the
+    water's change is now taken off when its level over the water (and the change of the rows highest above the top
+    face) stands over 2x the noise off 0, tilted or not; in unchanged light, or with the base not clipped, as
+    before."""
+    tr = SilhouetteTracer(edge_dark.frames[0], **_known(edge_dark))
+    frame = np.asarray(edge_dark.frames[2])
+    img = np.rot90(frame, tr.k)
+    w, dx, dy, _ = tr._walls(img, *_profiles(img[slice(*tr._reg_rows)])[:2])
+
+    def sample(points, directions, offsets, own=True):  # (the frame's light 1.15x, not divided out)
+        return 1.15 * tr._change(frame, points, directions, offsets, dx, dy) + 0.15
+
+    def unchanged(points, directions, offsets, own=True):
+        return tr._change(frame, points, directions, offsets, dx, dy)
+
+    before, tilt0, _ = tr._noise(unchanged, w, clipped_base=True)
+    assert tilt0 is None
+    assert tr._noise(sample, w)[1] is None  # (the base's gain trusted: its rows not clipped)
+    noise, tilt, figure = tr._noise(sample, w, clipped_base=True)
+    assert 0.15 / before > 12.0  # (the level, in the noise: 14)
+    assert tilt is not None and figure < 2.0 * noise  # (a level, no tilt)
+    level = tilt[0] + tilt[1] * 0.5 * tr.view_shape[1] + tilt[2] * 0.5 * w.top_row
+    assert level == pytest.approx(0.15, abs=0.1 * before)
+    assert noise == pytest.approx(before, rel=0.02)  # ((v - p) / (1 + p): the change in the first frame's light)
+
+
+def test_light_the_bases_gain_did_not_take_off_is_not_a_neighbours_dome():
+    """drawn_20261207_62, measured blind: its exposure turned up 39 % over the series, its base at 0.97 of full
+    scale in the first frame, clipped after, so the gain read from the base was 1.04-1.08 for 1.10-1.39, and the
+    water read 9-14x the noise brighter than the first frame everywhere: taken for the neighbour's dome merging
+    with the face's change, 6 of 9 frames were flagged touching (the neighbour 52-182 px off), one of them 2.3x the
+    tolerance off beneath that flag; the last frame's rim 0.98 px small, ok.  Now the water's level is taken off:
+    every frame ok (9 of 9: volumes within 0.14 of the tolerance, rims within 0.45 px).  Here a flat frame and two
+    domes (on the code before: touching, touching, the second 2.0x the tolerance off)."""
+    s = render_look("drawn_20261207_62", [0.0, 1.5, 3.0], shape=(600, 1024), lambda_pre=PRE)
+    ds = _extract(s)
+    sc = score(s.truth, ds)
+    assert np.all(ds.light_gain.values[1:] < 1.1) and s.truth.light_gain.values[-1] > 1.35  # (the base clipped)
+    assert list(ds.flag.values) == ["ok"] * 3, list(ds.flag.values)
+    assert sc["n_silent"] == 0 and np.all(sc["dv_tol"] < 0.5), sc["dv_tol"]
+    assert np.all(np.abs(sc["rim_bias_px"]) < 0.5), sc["rim_bias_px"]
+
+
 def test_a_neighbouring_well_is_not_this_chambers_wall():
     """ho_blind_1206c: a neighbouring well 430 um to the right (its dome 0.7 of this one's).  Measured blind, its
     left wall's zone was as strong as this well's two, the search paired this well's right wall with it and the
