@@ -54,12 +54,6 @@ WALL_REACH = (2.0, 12.0)
 def clip_level(values):
     """The camera's clip level in ``values``: their largest value when it is a full scale (:data:`FULL_SCALES`
     or the integer dtype's largest) held by at least :data:`MIN_PILE` of them, else None."""
-    mask = clip_mask(values)
-    return None if mask is None else np.asarray(values)[mask][0]
-
-
-def clip_mask(values):
-    """Boolean mask of ``values`` at the camera's clip level (see :func:`clipped_share`), or None when none is."""
     v = np.asarray(values)
     if v.size == 0:
         return None
@@ -67,8 +61,14 @@ def clip_mask(values):
     full = float(np.iinfo(v.dtype).max) if v.dtype.kind in "ui" else np.nan
     if not (float(top) in FULL_SCALES or float(top) == full):
         return None
-    mask = v == top
-    return mask if np.count_nonzero(mask) >= MIN_PILE else None
+    return top if np.count_nonzero(v == top) >= MIN_PILE else None
+
+
+def clip_mask(values):
+    """Boolean mask of ``values`` at the camera's clip level (see :func:`clipped_share`), or None when none is."""
+    v = np.asarray(values)
+    top = clip_level(v)
+    return None if top is None else v == top
 
 
 def raised(values, mask, factor=BRIGHTER):

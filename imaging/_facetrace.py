@@ -1665,9 +1665,9 @@ class SilhouetteTracer:
             return raw, None, 0.0
         tilt = float(abs(plane[1]) * self.view_shape[1] + abs(plane[2]) * self.view_shape[0])
         # (the plane's level over the water: a change of the whole view's light the base's gain did not take off,
-        # its rows clipped; the noise, a MAD, does not see it: drawn_20261207_62,
-        # its exposure up 39 % and its base clipped, read a gain of 1.04-1.08 for 1.10-1.39 and the water 9-14x
-        # the noise brighter than the first frame, taken for a neighbour's dome: touching)
+        # its rows clipped, which the noise, a MAD, does not see: drawn_20261207_62, its exposure up 39 % and its
+        # base clipped, read a gain of 1.04-1.08 for 1.10-1.39 and the water 9-14x the noise brighter than the
+        # first frame, taken for a neighbour's dome: touching)
         level = float(plane[0] + plane[1] * np.mean(at) + plane[2] * np.mean(rows))
         top = float(np.median(v[:_NOISE_TOP_ROWS]))  # (the rows highest above the top face: a dome's inside, a dyed
         # liquid over most of the rows, is not a change of the light: ho_blind_1206e)

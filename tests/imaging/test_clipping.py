@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from osmobulge.imaging._chamber import FrameView
-from osmobulge.imaging._clipping import MOVED_FLAG, clip_mask, clipped_share, raised, wall_clipping
+from osmobulge.imaging._clipping import MOVED_FLAG, clip_level, clip_mask, clipped_share, raised, wall_clipping
 from osmobulge.imaging.extract import extract
 from osmobulge.imaging.looks import render_look, score
 from osmobulge.modeling import PreStretch
@@ -27,6 +27,7 @@ def test_a_clip_is_a_full_scale_held_by_several_pixels(dtype, full):
     np.testing.assert_array_equal(mask, stored == full)
     assert np.count_nonzero(mask ^ over) <= np.count_nonzero(np.rint(light) == full)  # (rounding onto it)
     assert clipped_share(stored) == pytest.approx(mask.mean())
+    assert clip_level(stored) == full
 
 
 def test_no_clip_below_full_scale_or_at_one_or_two_pixels():
@@ -40,6 +41,8 @@ def test_no_clip_below_full_scale_or_at_one_or_two_pixels():
     three = np.r_[dim, 4095, 4095, 4095].astype(np.uint16)
     assert np.count_nonzero(clip_mask(three)) == 3
     assert clip_mask(np.array([], np.uint16)) is None
+    empty = np.array([], np.uint16)
+    assert [clip_level(x) for x in (dim, plateau, two, three, empty)] == [None, None, None, 4095, None]
 
 
 def test_raised_brightens_only_the_masked_pixels_in_a_copy():
