@@ -1134,9 +1134,14 @@ class SilhouetteTracer:
             w, share = self._shifted_walls(np.asarray(crop, float), flat, clip, clip0, top - lo, at, near)
         else:
             light = self._bg[np.ix_(rows, moved)]
-            light = light + self._light_change(crop, rows, moved, light)
+            add, gain = self._light_change(crop, rows, moved, light)
+            light = light + add + gain * light
+            # what changed since the first frame beyond its light (a particle drifting past a wall: find_walls
+            # leaves its rows out)
+            flat = np.rot90(self._flat, self.k)[np.ix_(rows, moved)].astype(float)
+            change = (np.asarray(crop, float) - flat - add - gain * flat) / np.maximum(light, 1e-9)
             w = find_walls(crop, self.l0, depth_px=self.depth, top_row=top - lo, strip=_STRIP,
-                           near=(left - c0, right - c1), light=light)
+                           near=(left - c0, right - c1), light=light, change=change)
             share = 0.0
         return replace(w, top_row=w.top_row + lo, base_row=w.base_row + lo, left=w.left + c0,
                        right=w.right + c1), dx, dy, share
@@ -1225,8 +1230,8 @@ class SilhouetteTracer:
     def _light_change(self, crop, rows, moved, light):
         """How much brighter this frame's light is than the first frame's over the walls' ``crop`` (view ``rows``
         and ``moved`` columns of the first frame: the crop's less the drift to the pixel; ``light``: the first
-        frame's there), to be added to it: ``s + (L - 1) light``, with ``s`` and ``L - 1`` planes in the crop
-        fitted to this frame less the first, ``s + (L - 1) flat`` (least squares over every ``_LIGHT_ROWS``-th
+        frame's there): the planes ``(s, L - 1)`` over the crop, the light ``s + (L - 1) light`` brighter, fitted
+        to this frame less the first, ``s + (L - 1) flat`` (least squares over every ``_LIGHT_ROWS``-th
         row, again without the pixels more than 3 scaled MADs off the first fit: the residue of the drift's
         fraction of a px at the walls' edges, and the walls' own widening).
 
@@ -1258,7 +1263,7 @@ class SilhouetteTracer:
                 r = diff - a @ c
                 keep &= np.abs(r) <= 3.0 * max(_mad(r[keep]), 1e-9)
         x, y = x[None, :], y[:, None]
-        return c[0] + c[1] * x + c[2] * y + (c[3] + c[4] * x + c[5] * y) * light / level
+        return c[0] + c[1] * x + c[2] * y, (c[3] + c[4] * x + c[5] * y) / level
 
     def process(self, frame, index=0, *, guide=None, manual=None):
         """Measure one frame (``guide`` is not needed by this route and ignored); returns a FrameTrace."""

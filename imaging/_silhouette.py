@@ -35,6 +35,12 @@ __all__ = ["FlatMaps", "SilhouetteWalls", "find_walls"]
 
 #: largest row scatter (px) of a wall's silhouette edge about its line
 MAX_WALL_RMS = 0.5
+#: a later frame's wall row whose light just outside the wall (4-12 px out, the median) changed since the first
+#: frame by more than this many times the noise off the rows' common change is left out of the wall's line
+#: (:func:`_changed_rows`): a particle drifting past the wall.  Measured, in noise units: the presets and held-out
+#: looks under 7 light changes, up to 3.0 but where the light was clipped (12 of 4114 walls, their frames read
+#: no_membrane); drawn_20261207_59's particle against a wall 9.2
+_CHANGED_ROW = 4.0
 
 
 @dataclass(frozen=True)
@@ -123,7 +129,7 @@ def _scaled_deviation(img, bg):
 
 
 def find_walls(frame, l0_px, *, strip=(0.15, 0.6), depth_px=None, min_width=40, top_row=None,
-               near=None, top_near=None, light=None, maps=None, radius_px=None) -> SilhouetteWalls:
+               near=None, top_near=None, light=None, maps=None, radius_px=None, change=None) -> SilhouetteWalls:
     """Find the top face and the two walls of the central well in a flat, bulge-up frame.
 
     Parameters
@@ -159,6 +165,10 @@ def find_walls(frame, l0_px, *, strip=(0.15, 0.6), depth_px=None, min_width=40, 
     radius_px : float, optional
         The chamber's radius (px) when known: the walls are a pair of zones
         about that far from their middle (:func:`_wall_pair`).
+    change : ndarray of shape (M, N), optional
+        A later frame's change since the first frame beyond its light's, over
+        the light: the rows of a wall whose light just outside it changed are
+        left out of its line (:func:`_changed_rows`: a particle drifting past).
 
     Raises
     ------
@@ -199,7 +209,7 @@ def find_walls(frame, l0_px, *, strip=(0.15, 0.6), depth_px=None, min_width=40, 
             peaks.append(c0 + int(np.argmax(col_score[c0:c1])))
     else:
         peaks = _wall_pair(col_score, img.shape[1], min_width, radius_px)
-    return _fit_walls(sd, peaks, r0, r1, top_row, base_row)
+    return _fit_walls(sd, peaks, r0, r1, top_row, base_row, change)
 
 
 def _zone_scores(d, base_row, depth, strip):
@@ -528,7 +538,7 @@ def neighbour_walls(maps, k, w, depth_px, strip=(0.15, 0.6), min_width=40):
     return tuple(out)
 
 
-def _fit_walls(sd, peaks, r0, r1, top_row, base_row):
+def _fit_walls(sd, peaks, r0, r1, top_row, base_row, change=None):
     """Each wall's outer half-level edge row by row, fitted by a line and read at ``base_row``.
 
     ``sd``: the signed relative deviation from the local light.  The level is
@@ -543,6 +553,9 @@ def _fit_walls(sd, peaks, r0, r1, top_row, base_row):
     # the wall's zone lies inside the well: its outer edge is the wall (the left one walked in flipped columns)
     left = m - 1 - _wall_edges(strip[:, ::-1], m - 1 - cl)
     right = _wall_edges(strip, cr)
+    if change is not None:
+        gone = _changed_rows(change[r0:r1], left, right)
+        left, right = (np.where(g, np.nan, u) for u, g in zip((left, right), gone, strict=True))
     fits, res = [], []
     for u in (left, right):
         at, rms, n = _clipped_line(rows.astype(float), u, float(base_row))
@@ -554,6 +567,36 @@ def _fit_walls(sd, peaks, r0, r1, top_row, base_row):
         raise ChamberNotFound(f"the wall silhouettes are not straight lines (row scatter {max(res):.2f} px > "
                               f"{MAX_WALL_RMS} px): not walls, or a look this search cannot read")
     return SilhouetteWalls(float(top_row), float(base_row), fits[0], fits[1], max(res))
+
+
+def _changed_rows(change, left, right):
+    """The rows of each wall (``left``, ``right``: its edges, :func:`_wall_edges`) whose light just outside it
+    changed since the first frame: ``change``, this frame less the first frame's (its light's change taken off),
+    over the light, in the strip's rows; a row's change is the median over 4-12 px out (at least 4 samples).
+
+    A row is changed when its change lies more than :data:`_CHANGED_ROW` times
+    the noise off the median over both walls' rows (a change they share: the
+    walls' halos moved with their lean, light not quite taken off); the noise,
+    of one sample, from the differences of neighbouring samples (their mean
+    absolute value, a smooth particle's own slope barely counts).  A wall keeps
+    its rows when fewer than 5, or than a third of them, would be left.
+    """
+    levels, diffs, count = [], 0.0, 0
+    for edges, outward in ((left, -1), (right, 1)):
+        level, d, k = _outside_levels(change, edges, outward)
+        levels.append(level)
+        diffs, count = diffs + d, count + k
+    if count == 0:
+        return [np.zeros(left.shape, bool), np.zeros(right.shape, bool)]
+    noise = max(np.sqrt(np.pi / 2) * diffs / count / np.sqrt(2), 1e-3)  # (relative light)
+    both = np.concatenate(levels)
+    common = np.nanmedian(both) if np.isfinite(both).any() else 0.0
+    gone = []
+    for u, level in zip((left, right), levels, strict=True):
+        g = np.abs(level - common) > _CHANGED_ROW * noise  # (False where nan)
+        kept = np.count_nonzero(np.isfinite(u) & ~g)
+        gone.append(g if kept >= max(5, np.count_nonzero(np.isfinite(u)) / 3) else np.zeros(u.shape, bool))
+    return gone
 
 
 @njit(cache=True, nogil=True)
@@ -586,6 +629,39 @@ def _clipped_line(x, y, at):
             d = y[i] - (a + b * x[i])
             ss += d * d
     return a + b * at, np.sqrt(ss / m), n
+
+
+@njit(cache=True, nogil=True)
+def _outside_levels(change, edges, outward):
+    """:func:`_changed_rows`' samples of ``change`` 4-12 px outside each row's edge ``edges`` (``outward``: +1 to
+    higher columns, -1 to lower; the edge rounded to the pixel): per row their median (``np.nanmedian``; nan with
+    fewer than 4 finite samples inside the row, or no edge), and the sum of the absolute differences of
+    neighbouring finite samples and their number."""
+    n, m = change.shape
+    level = np.full(n, np.nan)
+    vals = np.empty(9)
+    diffs, count = 0.0, 0
+    for i in range(n):
+        e = edges[i]
+        if not np.isfinite(e):
+            continue
+        k0 = int(np.rint(e))
+        cnt = 0
+        last = np.nan
+        for o in range(4, 13):
+            k = k0 + outward * o
+            v = change[i, k] if 0 <= k < m else np.nan
+            if np.isfinite(v) and np.isfinite(last):
+                diffs += abs(v - last)
+                count += 1
+            last = v
+            if np.isfinite(v):
+                vals[cnt] = v
+                cnt += 1
+        if cnt >= 4:
+            srt = np.sort(vals[:cnt])
+            level[i] = 0.5 * (srt[(cnt - 1) // 2] + srt[cnt // 2])
+    return level, diffs, count
 
 
 # ---------------------------------------------------------------------- compiled inner loops

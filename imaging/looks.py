@@ -376,10 +376,10 @@ DRAWN_BATCHES = {
     # faces meet at the half-way column, _facetrace._GAP_CLOSED).  Looks 56-63, measured once at stop 45: 54 of 72
     # frames ok, the truth's 9 touching frames flagged (look 60's a frame early too: 2.5 px read, 6.7 in truth), worst
     # 0.56 of the tolerance; 2 SILENT: look 59 frame 3 (2 um/px: a particle against the wall by the rim pulled it
-    # 0.18 px in, lambda_pre 0.33 % off) and look 62 frame 8 (its exposure up 39 % and its base clipped: the rim
-    # 0.98 px small); false flags: look 62 frames 2-7 touching (the water's level the base's gain did not take off,
-    # mended since: 9 of 9 ok, _facetrace._LEVEL_NOISE), look 57 frame 7 touching, look 61 frame 8 fractured (a
-    # particle at the foot)
+    # 0.18 px in, lambda_pre 0.33 % off; mended since: 0.10 px, 0.19 %, _silhouette._changed_rows) and look 62
+    # frame 8 (its exposure up 39 % and its base clipped: the rim 0.98 px small); false flags: look 62 frames 2-7
+    # touching (the water's level the base's gain did not take off, mended since: 9 of 9 ok,
+    # _facetrace._LEVEL_NOISE), look 57 frame 7 touching, look 61 frame 8 fractured (a particle at the foot)
     20261207: 64,
 }
 

@@ -5,7 +5,7 @@ import pytest
 from scipy import ndimage
 
 from osmobulge.imaging._chamber import ChamberNotFound
-from osmobulge.imaging._silhouette import _strongest, _wall_pair, _wall_side, find_walls
+from osmobulge.imaging._silhouette import _changed_rows, _outside_levels, _strongest, _wall_pair, _wall_side, find_walls
 from osmobulge.imaging.looks import LOOKS, render_look
 from osmobulge.imaging.optics import Optics, render_optical
 
@@ -422,3 +422,52 @@ def test_wells_side_by_side_closer_than_min_width_are_not_read_as_one():
     one = 2.0 * (_zone(x, 300.0, -1) + _zone(x, 700.0, 1))
     pair = _wall_pair(one, x.size, 40)
     assert pair == _wall_pair(one, x.size, 40, radius_px=200.0) and abs(pair[0] - 300) <= 4 and abs(pair[1] - 700) <= 4
+
+
+def test_rows_whose_light_outside_the_wall_changed_are_left_out_of_its_line():
+    """_changed_rows on a change image of noise (0.02 of the light) with the two walls' edges at columns 30 and 90
+    of 60 rows: a particle (0.3 darker, 8 px across) 7 px outside the right wall takes out its rows there and no
+    others; a change both walls share (their halos moved, 5x the noise) takes out none; a particle over most of a
+    wall's rows leaves its rows all in (too few would be left to fit a line)."""
+    rng = np.random.default_rng(3)
+    n, m = 60, 120
+    left, right = np.full(n, 30.0), np.full(n, 90.0)
+    noise = 0.02 * rng.standard_normal((n, m))
+    yy, xx = np.mgrid[:n, :m]
+    particle = -0.3 * (np.hypot(yy - 20, xx - 97) <= 4)
+    g_left, g_right = _changed_rows(noise + particle, left, right)
+    assert not g_left.any()
+    assert set(np.flatnonzero(g_right)) <= set(range(16, 25)) and np.count_nonzero(g_right) >= 5
+    assert not np.concatenate(_changed_rows(noise, left, right)).any()
+    shared = noise + 5 * 0.02 * (np.abs(xx - 60) > 33)  # (both walls' outsides alike)
+    assert not np.concatenate(_changed_rows(shared, left, right)).any()
+    big = noise - 0.3 * ((yy < 45) & (xx > 92))  # (45 of the right wall's 60 rows)
+    g_left, g_right = _changed_rows(big, left, right)
+    assert not g_left.any() and not g_right.any()
+    # rows without an edge take no part: nothing to leave out there
+    right_gaps = right.copy()
+    right_gaps[18:23] = np.nan
+    assert not _changed_rows(noise + particle, left, right_gaps)[1][18:23].any()
+
+
+def test_the_levels_outside_a_wall_are_numpys():
+    """_outside_levels (compiled) against the numpy expression: the samples 4-12 px outside each row's rounded edge,
+    nan off the row; per row ``np.nanmedian`` where at least 4 are finite, the absolute differences of neighbouring
+    finite samples summed and counted.  Edges near either end of the row, nan edges and nan samples included."""
+    rng = np.random.default_rng(5)
+    change = rng.standard_normal((40, 50))
+    change[rng.random(change.shape) < 0.05] = np.nan
+    edges = rng.uniform(-3.0, 53.0, 40)
+    edges[::7] = np.nan
+    for outward in (-1, 1):
+        level, diffs, count = _outside_levels(change, edges, outward)
+        k = np.rint(np.nan_to_num(edges, nan=-1000.0)).astype(int)[:, None] + outward * np.arange(4, 13)
+        band = np.where((k >= 0) & (k < 50), np.take_along_axis(change, np.clip(k, 0, 49), axis=1), np.nan)
+        band[np.isnan(edges)] = np.nan
+        enough = np.count_nonzero(np.isfinite(band), axis=1) >= 4
+        want = np.full(40, np.nan)
+        want[enough] = np.nanmedian(band[enough], axis=1)
+        np.testing.assert_array_equal(level, want)
+        steps = np.diff(band, axis=1)
+        steps = steps[np.isfinite(steps)]
+        assert count == steps.size and diffs == pytest.approx(np.abs(steps).sum(), rel=1e-12)
