@@ -379,8 +379,11 @@ DRAWN_BATCHES = {
     # 0.18 px in, lambda_pre 0.33 % off; mended since: 0.10 px, 0.19 %, _silhouette._changed_rows) and look 62
     # frame 8 (its exposure up 39 % and its base clipped: the rim 0.98 px small); false flags: look 62 frames 2-7
     # touching (the water's level the base's gain did not take off, mended since: 9 of 9 ok,
-    # _facetrace._LEVEL_NOISE), look 57 frame 7 touching, look 61 frame 8 fractured (a particle at the foot)
-    20261207: 64,
+    # _facetrace._LEVEL_NOISE), look 57 frame 7 touching, look 61 frame 8 fractured (a particle at the foot).
+    # Looks 64-71, measured once at stop 46: 68 of 72 frames ok, 0 silent, worst 0.87 of the tolerance, rims within
+    # 0.23 px; look 67's 2 touching frames flagged; looks 64 and 65 flag their last frame touching with the bands
+    # 2.5 and 4.7 px apart (the dome past the half-way column, the carried early touching)
+    20261207: 72,
 }
 
 
