@@ -1136,12 +1136,11 @@ class SilhouetteTracer:
             light = self._bg[np.ix_(rows, moved)]
             add, gain = self._light_change(crop, rows, moved, light)
             light = light + add + gain * light
-            # what changed since the first frame beyond its light (a particle drifting past a wall: find_walls
-            # leaves its rows out)
+            # the first frame in this light: where this frame differs from it beyond the walls' shift (a particle
+            # drifting past a wall), find_walls leaves the wall's rows out
             flat = np.rot90(self._flat, self.k)[np.ix_(rows, moved)].astype(float)
-            change = (np.asarray(crop, float) - flat - add - gain * flat) / np.maximum(light, 1e-9)
             w = find_walls(crop, self.l0, depth_px=self.depth, top_row=top - lo, strip=_STRIP,
-                           near=(left - c0, right - c1), light=light, change=change)
+                           near=(left - c0, right - c1), light=light, reference=flat * (1.0 + gain) + add)
             share = 0.0
         return replace(w, top_row=w.top_row + lo, base_row=w.base_row + lo, left=w.left + c0,
                        right=w.right + c1), dx, dy, share

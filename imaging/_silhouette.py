@@ -41,6 +41,18 @@ MAX_WALL_RMS = 0.5
 #: looks under 7 light changes, up to 3.0 but where the light was clipped (12 of 4114 walls, their frames read
 #: no_membrane); drawn_20261207_59's particle against a wall 9.2
 _CHANGED_ROW = 4.0
+#: and a row across the wall that the first frame's row, shifted, leaves a misfit over this many times the rows'
+#: median misfit (or the noise squared).  Measured, the largest ratio of a wall's rows: the presets and held-out
+#: looks under 7 light changes, 2.2 median, 4.0 at the 99th percentile, 6.7 at most (ho_blind_1206n under a
+#: ramp of stray light); a particle over coarse_2um's wall 13-34 (a faint one, 0.15 darker: 4)
+_CHANGED_SHAPE = 8.0
+#: rows either side of a changed row also left out (a particle's blurred rim: on coarse_2um a particle over the
+#: wall's edge moved the rim 0.10 px with its rows over _CHANGED_SHAPE left out, 0.03 with these too)
+_CHANGED_SPREAD = 2
+#: the columns either side of a wall's edge its row is matched over, and the largest shift (px; the walls' lean
+#: at Vtilde 4: 8.6 px at a wall's top on edge_dark)
+_ALIGN_HALF = 12
+_ALIGN_REACH = 12
 
 
 @dataclass(frozen=True)
@@ -129,7 +141,8 @@ def _scaled_deviation(img, bg):
 
 
 def find_walls(frame, l0_px, *, strip=(0.15, 0.6), depth_px=None, min_width=40, top_row=None,
-               near=None, top_near=None, light=None, maps=None, radius_px=None, change=None) -> SilhouetteWalls:
+               near=None, top_near=None, light=None, maps=None, radius_px=None,
+               reference=None) -> SilhouetteWalls:
     """Find the top face and the two walls of the central well in a flat, bulge-up frame.
 
     Parameters
@@ -165,10 +178,11 @@ def find_walls(frame, l0_px, *, strip=(0.15, 0.6), depth_px=None, min_width=40, 
     radius_px : float, optional
         The chamber's radius (px) when known: the walls are a pair of zones
         about that far from their middle (:func:`_wall_pair`).
-    change : ndarray of shape (M, N), optional
-        A later frame's change since the first frame beyond its light's, over
-        the light: the rows of a wall whose light just outside it changed are
-        left out of its line (:func:`_changed_rows`: a particle drifting past).
+    reference : ndarray of shape (M, N), optional
+        For a later frame, the first frame in this frame's light (its light's
+        change put on): the rows of a wall where this frame differs from it
+        beyond the wall's own shift are left out of the wall's line
+        (:func:`_changed_rows`: a particle drifting past).
 
     Raises
     ------
@@ -209,7 +223,14 @@ def find_walls(frame, l0_px, *, strip=(0.15, 0.6), depth_px=None, min_width=40, 
             peaks.append(c0 + int(np.argmax(col_score[c0:c1])))
     else:
         peaks = _wall_pair(col_score, img.shape[1], min_width, radius_px)
-    return _fit_walls(sd, peaks, r0, r1, top_row, base_row, change)
+    pair = None
+    if reference is not None and maps is None:
+        ref = np.asarray(reference, float)
+        if ref.shape != img.shape:
+            raise ValueError(f"reference has shape {ref.shape}, the frame {img.shape}")
+        lit = np.maximum(bg, 1e-9)
+        pair = (img / lit - 1.0, ref / lit - 1.0)
+    return _fit_walls(sd, peaks, r0, r1, top_row, base_row, pair)
 
 
 def _zone_scores(d, base_row, depth, strip):
@@ -538,7 +559,7 @@ def neighbour_walls(maps, k, w, depth_px, strip=(0.15, 0.6), min_width=40):
     return tuple(out)
 
 
-def _fit_walls(sd, peaks, r0, r1, top_row, base_row, change=None):
+def _fit_walls(sd, peaks, r0, r1, top_row, base_row, pair=None):
     """Each wall's outer half-level edge row by row, fitted by a line and read at ``base_row``.
 
     ``sd``: the signed relative deviation from the local light.  The level is
@@ -553,8 +574,8 @@ def _fit_walls(sd, peaks, r0, r1, top_row, base_row, change=None):
     # the wall's zone lies inside the well: its outer edge is the wall (the left one walked in flipped columns)
     left = m - 1 - _wall_edges(strip[:, ::-1], m - 1 - cl)
     right = _wall_edges(strip, cr)
-    if change is not None:
-        gone = _changed_rows(change[r0:r1], left, right)
+    if pair is not None:  # (this frame's and the first frame's light over this frame's, less 1: see find_walls)
+        gone = _changed_rows(pair[0][r0:r1], pair[1][r0:r1], left, right)
         left, right = (np.where(g, np.nan, u) for u, g in zip((left, right), gone, strict=True))
     fits, res = [], []
     for u in (left, right):
@@ -569,18 +590,29 @@ def _fit_walls(sd, peaks, r0, r1, top_row, base_row, change=None):
     return SilhouetteWalls(float(top_row), float(base_row), fits[0], fits[1], max(res))
 
 
-def _changed_rows(change, left, right):
-    """The rows of each wall (``left``, ``right``: its edges, :func:`_wall_edges`) whose light just outside it
-    changed since the first frame: ``change``, this frame less the first frame's (its light's change taken off),
-    over the light, in the strip's rows; a row's change is the median over 4-12 px out (at least 4 samples).
+def _changed_rows(now, then, left, right):
+    """The rows of each wall (``left``, ``right``: its edges, :func:`_wall_edges`) where this frame changed since the
+    first beyond the light and the wall's own shift: ``now`` and ``then``, this frame and the first frame (in this
+    frame's light) over this frame's light, less 1, in the strip's rows.  Two tests, either suffices:
 
-    A row is changed when its change lies more than :data:`_CHANGED_ROW` times
-    the noise off the median over both walls' rows (a change they share: the
-    walls' halos moved with their lean, light not quite taken off); the noise,
-    of one sample, from the differences of neighbouring samples (their mean
-    absolute value, a smooth particle's own slope barely counts).  A wall keeps
-    its rows when fewer than 5, or than a third of them, would be left.
+    * the light just outside the wall (the median of ``now - then`` over 4-12
+      px out, at least 4 samples) lies more than :data:`_CHANGED_ROW` times
+      the noise off the median over both walls' rows (a change they share:
+      the walls' halos moved with their lean, light not quite taken off); the
+      noise, of one sample, from the differences of neighbouring samples
+      (their mean absolute value: a smooth particle's own slope barely counts);
+    * the row across the wall (``_ALIGN_HALF`` px either side of its edge)
+      matched by the first frame's row shifted (within ``_ALIGN_REACH`` px:
+      the wall's lean, the drift's fraction of a px; :func:`_aligned_misfits`)
+      leaves a mean square more than :data:`_CHANGED_SHAPE` times the median
+      over both walls' rows, or the noise squared when that is larger: a
+      particle over the wall's edge, which a shift does not explain.
+
+    The rows found and those within :data:`_CHANGED_SPREAD` of them (a particle's
+    blurred rim) are left out; a wall keeps its rows when fewer than 5, or than a
+    third of them, would be left.
     """
+    change = now - then
     levels, diffs, count = [], 0.0, 0
     for edges, outward in ((left, -1), (right, 1)):
         level, d, k = _outside_levels(change, edges, outward)
@@ -591,9 +623,15 @@ def _changed_rows(change, left, right):
     noise = max(np.sqrt(np.pi / 2) * diffs / count / np.sqrt(2), 1e-3)  # (relative light)
     both = np.concatenate(levels)
     common = np.nanmedian(both) if np.isfinite(both).any() else 0.0
+    now, then = np.ascontiguousarray(now), np.ascontiguousarray(then)
+    misfits = [_aligned_misfits(now, then, u, _ALIGN_REACH, _ALIGN_HALF) for u in (left, right)]
+    every = np.concatenate(misfits)
+    typical = max(np.nanmedian(every), noise**2) if np.isfinite(every).any() else np.inf
     gone = []
-    for u, level in zip((left, right), levels, strict=True):
-        g = np.abs(level - common) > _CHANGED_ROW * noise  # (False where nan)
+    for u, level, misfit in zip((left, right), levels, misfits, strict=True):
+        g = (np.abs(level - common) > _CHANGED_ROW * noise) | (misfit > _CHANGED_SHAPE * typical)  # (False at nan)
+        if g.any():
+            g = ndimage.binary_dilation(g, iterations=_CHANGED_SPREAD)
         kept = np.count_nonzero(np.isfinite(u) & ~g)
         gone.append(g if kept >= max(5, np.count_nonzero(np.isfinite(u)) / 3) else np.zeros(u.shape, bool))
     return gone
@@ -662,6 +700,54 @@ def _outside_levels(change, edges, outward):
             srt = np.sort(vals[:cnt])
             level[i] = 0.5 * (srt[(cnt - 1) // 2] + srt[cnt // 2])
     return level, diffs, count
+
+
+@njit(cache=True, nogil=True)
+def _aligned_misfits(now, then, edges, reach, half):
+    """:func:`_changed_rows`' misfit of each row: over the columns ``j`` within ``half`` of the row's rounded edge,
+    the least mean of ``(now[j] - then[j - f])**2`` over the shifts ``f`` in whole px within ``reach`` (the first
+    least), then in tenths of a px within 1 px of the best whole one (``then`` linearly interpolated; a tenth
+    reaching past the row is skipped); nan where there is no edge or the window or a whole shift's leaves the row
+    (those shifts are skipped)."""
+    n, m = now.shape
+    out = np.full(n, np.nan)
+    for i in range(n):
+        e = edges[i]
+        if not np.isfinite(e):
+            continue
+        c = int(np.rint(e))
+        j0, j1 = c - half, c + half + 1
+        if j0 < 0 or j1 > m:
+            continue
+        best, bs = np.inf, 0
+        for s in range(-reach, reach + 1):
+            if j0 - s < 0 or j1 - s > m:
+                continue
+            ss = 0.0
+            for j in range(j0, j1):
+                d = now[i, j] - then[i, j - s]
+                ss += d * d
+            if ss < best:
+                best, bs = ss, s
+        if not np.isfinite(best):
+            continue
+        for t in range(-10, 11):
+            f = bs + 0.1 * t
+            ss = 0.0
+            ok = True
+            for j in range(j0, j1):
+                x = j - f
+                k = int(np.floor(x))
+                if k < 0 or k + 1 >= m:
+                    ok = False
+                    break
+                w = x - k
+                d = now[i, j] - ((1.0 - w) * then[i, k] + w * then[i, k + 1])
+                ss += d * d
+            if ok and ss < best:
+                best = ss
+        out[i] = best / (j1 - j0)
+    return out
 
 
 # ---------------------------------------------------------------------- compiled inner loops

@@ -955,11 +955,13 @@ def test_light_the_bases_gain_did_not_take_off_is_not_a_neighbours_dome():
 
 
 def test_a_particle_against_a_wall_does_not_move_the_rim():
-    """coarse_2um (2 um/px: a wall 30-odd rows long), its Vtilde 2 frame twice, the second with a particle (a disc
-    darker by 0.3-0.45, 6-9 px in radius, blurred by 1 px) just outside the right wall below the base's top
-    surface.  Its rows' edges read against the darkened light outside the wall, and the wall's line, fitted
-    through them, moved the rim by 0.08-0.14 px (drawn_20261207_59 frame 3, measured blind: 0.18 px, lambda_pre
-    0.33 % off, ok).  Those rows are left out now: the rim as without the particle, within 0.03 px."""
+    """coarse_2um (2 um/px: a wall 30-odd rows long), its Vtilde 2 frame five times, four with a particle (a disc
+    darker by 0.3-0.45, 5-9 px in radius, blurred by 1 px) against the right wall below the base's top surface:
+    two outside it, two over its edge from the well's side.  Their rows' edges are read against the darkened
+    light, or the particle's silhouette merges with the wall's, and the wall's line, fitted through them, moved
+    the rim by 0.08-0.14 px outside and 0.28-0.49 px over the edge (drawn_20261207_59 frame 3, measured blind:
+    0.18 px, lambda_pre 0.33 % off, ok).  Those rows are left out now: the rim as without the particle, within
+    0.05 px."""
     s = render_look("coarse_2um", [0.0, 2.0], shape=(400, 600), lambda_pre=PRE)
     t, p = s.truth, s.truth.attrs["pixel_size"]
     rim_row, axis = t.attrs["anchor_row"], t.attrs["anchor_col"]
@@ -967,13 +969,14 @@ def test_a_particle_against_a_wall_does_not_move_the_rim():
     depth = t.attrs["chamber_depth"] / p
     yy, xx = np.mgrid[: s.frames.shape[1], : s.frames.shape[2]]
     frames = [s.frames[0], s.frames[1]]
-    for below, out, radius, opacity in ((0.3, 8.0, 6.0, 0.3), (0.2, 7.0, 9.0, 0.45)):
+    for below, out, radius, opacity in ((0.3, 8.0, 6.0, 0.3), (0.2, 7.0, 9.0, 0.45), (0.25, -4.0, 8.0, 0.45),
+                                        (0.2, 0.0, 5.0, 0.45)):
         disc = ndimage.gaussian_filter((np.hypot(yy - rim_row - below * depth, xx - right - out) <= radius) * 1.0, 1.0)
         frames.append(np.rint(s.frames[1] * (1.0 - opacity * disc)).astype(s.frames.dtype))
     ds = extract(np.stack(frames), pixel_size=p, chamber=_chamber(t), progress=False, frame_interval=600.0)
-    assert list(ds.flag.values) == ["ok"] * 4
+    assert list(ds.flag.values) == ["ok"] * 6
     rim = ds.rim_radius.values / p
-    assert np.all(np.abs(rim[2:] - rim[1]) < 0.03), rim[2:] - rim[1]
+    assert np.all(np.abs(rim[2:] - rim[1]) < 0.05), rim[2:] - rim[1]
 
 
 def test_a_neighbouring_well_is_not_this_chambers_wall():

@@ -5,7 +5,15 @@ import pytest
 from scipy import ndimage
 
 from osmobulge.imaging._chamber import ChamberNotFound
-from osmobulge.imaging._silhouette import _changed_rows, _outside_levels, _strongest, _wall_pair, _wall_side, find_walls
+from osmobulge.imaging._silhouette import (
+    _aligned_misfits,
+    _changed_rows,
+    _outside_levels,
+    _strongest,
+    _wall_pair,
+    _wall_side,
+    find_walls,
+)
 from osmobulge.imaging.looks import LOOKS, render_look
 from osmobulge.imaging.optics import Optics, render_optical
 
@@ -424,30 +432,60 @@ def test_wells_side_by_side_closer_than_min_width_are_not_read_as_one():
     assert pair == _wall_pair(one, x.size, 40, radius_px=200.0) and abs(pair[0] - 300) <= 4 and abs(pair[1] - 700) <= 4
 
 
-def test_rows_whose_light_outside_the_wall_changed_are_left_out_of_its_line():
-    """_changed_rows on a change image of noise (0.02 of the light) with the two walls' edges at columns 30 and 90
-    of 60 rows: a particle (0.3 darker, 8 px across) 7 px outside the right wall takes out its rows there and no
-    others; a change both walls share (their halos moved, 5x the noise) takes out none; a particle over most of a
-    wall's rows leaves its rows all in (too few would be left to fit a line)."""
+def test_rows_where_a_wall_changed_beyond_its_shift_are_left_out_of_its_line():
+    """_changed_rows on 60 rows of two walls' zones (dark lines 0.5 deep, 2 px wide, 3 px inside edges at columns
+    30 and 90), leaned 1.3 px outwards since the first frame, with noise of 0.02: nothing left out.  A particle
+    (0.3 darker, 8 px across) 7 px outside the right wall takes out its rows there (and 2 either side) and no
+    others, as does one over the right wall's edge from the well's side (which a shift of the row does not
+    explain); a change both walls' outsides share (their halos moved, 5x the noise) takes out none; a particle
+    over most of a wall's rows leaves its rows all in (too few would be left to fit a line)."""
     rng = np.random.default_rng(3)
     n, m = 60, 120
-    left, right = np.full(n, 30.0), np.full(n, 90.0)
-    noise = 0.02 * rng.standard_normal((n, m))
-    yy, xx = np.mgrid[:n, :m]
-    particle = -0.3 * (np.hypot(yy - 20, xx - 97) <= 4)
-    g_left, g_right = _changed_rows(noise + particle, left, right)
-    assert not g_left.any()
-    assert set(np.flatnonzero(g_right)) <= set(range(16, 25)) and np.count_nonzero(g_right) >= 5
-    assert not np.concatenate(_changed_rows(noise, left, right)).any()
-    shared = noise + 5 * 0.02 * (np.abs(xx - 60) > 33)  # (both walls' outsides alike)
-    assert not np.concatenate(_changed_rows(shared, left, right)).any()
-    big = noise - 0.3 * ((yy < 45) & (xx > 92))  # (45 of the right wall's 60 rows)
-    g_left, g_right = _changed_rows(big, left, right)
+    yy, xx = np.mgrid[:n, :m].astype(float)
+
+    def zones(shift):
+        return -0.5 * (np.exp(-0.5 * ((xx - 33 + shift) / 2) ** 2) + np.exp(-0.5 * ((xx - 87 - shift) / 2) ** 2))
+
+    then = zones(0.0)
+    now = zones(1.3) + 0.02 * rng.standard_normal((n, m))
+    left, right = np.full(n, 30.0 - 1.3), np.full(n, 90.0 + 1.3)
+    assert not np.concatenate(_changed_rows(now, then, left, right)).any()
+    for row, col in ((20, 98.3), (35, 88.0)):  # (outside the right wall; over its edge from inside)
+        particle = -0.3 * (np.hypot(yy - row, xx - col) <= 4)
+        g_left, g_right = _changed_rows(now + particle, then, left, right)
+        assert not g_left.any()
+        assert set(np.flatnonzero(g_right)) <= set(range(row - 6, row + 7)) and np.count_nonzero(g_right) >= 5
+    shared = now + 5 * 0.02 * (np.abs(xx - 60) > 34)  # (both walls' outsides alike)
+    assert not np.concatenate(_changed_rows(shared, then, left, right)).any()
+    big = now - 0.3 * ((yy < 45) & (xx > 93))  # (45 of the right wall's 60 rows)
+    g_left, g_right = _changed_rows(big, then, left, right)
     assert not g_left.any() and not g_right.any()
-    # rows without an edge take no part: nothing to leave out there
-    right_gaps = right.copy()
-    right_gaps[18:23] = np.nan
-    assert not _changed_rows(noise + particle, left, right_gaps)[1][18:23].any()
+
+
+def test_the_aligned_misfits_are_numpys():
+    """_aligned_misfits (compiled) against the numpy expression: per row, the least mean square of ``now - then``
+    shifted over the window of ``half`` px either side of the rounded edge, whole shifts within ``reach`` (skipped
+    where the shifted window leaves the row), then tenths within 1 px of the best whole one (np.interp; skipped
+    where they reach past the row); nan without an edge or with the window off the row."""
+    rng = np.random.default_rng(7)
+    now, then = rng.standard_normal((30, 60)), rng.standard_normal((30, 60))
+    then[5] = np.roll(now[5], 3)  # (a row that is a shift of the other: its misfit ~0 at -3)
+    edges = rng.uniform(-2.0, 62.0, 30)
+    edges[5], edges[::9] = 30.0, np.nan
+    got = _aligned_misfits(now, then, edges, 6, 5)
+    x = np.arange(60.0)
+    for i in range(30):
+        if not np.isfinite(edges[i]) or not 5 <= int(np.rint(edges[i])) <= 54:
+            assert np.isnan(got[i])
+            continue
+        j = np.arange(int(np.rint(edges[i])) - 5, int(np.rint(edges[i])) + 6)
+        whole = {s: np.mean((now[i, j] - then[i, j - s]) ** 2) for s in range(-6, 7)
+                 if j[0] - s >= 0 and j[-1] - s < 60}
+        best = min(whole, key=lambda s: (whole[s], s))  # (the first least: whole shifts are tried from -6 up)
+        fine = [np.mean((now[i, j] - np.interp(j - (best + 0.1 * t), x, then[i])) ** 2) for t in range(-10, 11)
+                if j[0] - (best + 0.1 * t) >= 0 and np.floor(j[-1] - (best + 0.1 * t)) + 1 < 60]
+        assert got[i] == pytest.approx(min([whole[best], *fine]), rel=1e-9), i
+    assert got[5] < 1e-20
 
 
 def test_the_levels_outside_a_wall_are_numpys():
