@@ -379,6 +379,10 @@ _WALL_CANDIDATES, _WALL_SHARE = 6, 0.5
 #: the chamber's well: the neighbouring zones (down to _RADIUS_GAP px apart: the walls of wells 40 um apart at 1.6
 #: um/px lie 30 px apart, below find_walls' min_width) are paired again (:func:`_wall_pair`)
 _RADIUS_TOL, _RADIUS_GAP = 0.15, 8
+#: zones this near a wall's (a tenth of the radius, at most 2 _RADIUS_GAP) are its own when it is paired: a second
+#: line of the wall's silhouette (drawn_20261207_72, inverted, absorbing: every wall's zone doubled 9-15 px
+#: apart, 11 um at 0.85 um/px; neighbouring wells' walls 34 px apart and more)
+_OWN_ZONE = 0.1
 
 
 def _central_pair(cols, sides, width, fits=lambda cl, cr: True):
@@ -395,9 +399,10 @@ def _wall_pair(col_score, width, min_width, radius_px=None):
     ``radius_px`` is given and the pair :func:`_zone_pair` finds is not of it).
 
     With ``radius_px``, when that pair's half-distance lies more than :data:`_RADIUS_TOL` off it or another zone
-    lies between them (measured on drawn_20261207_23 in a 460 x 860 px field: wells 36 um apart, every zone alike on
-    both sides, the chamber's left wall and the neighbour's left one were paired, 14 % over the radius, and the
-    route refused the view): of the zones (:func:`_zone_peaks`), the two next to each other,
+    lies between them (but not within :data:`_OWN_ZONE` of the radius of either: the wall's own; measured on
+    drawn_20261207_23 in a 460 x 860 px field: wells 36 um apart, every zone alike on both sides, the chamber's
+    left wall and the neighbour's left one were paired, 14 % over the radius, and the route refused the view): of
+    the zones (:func:`_zone_peaks`), the two next to each other,
     not of contrary sides, whose half-distance lies within
     :data:`_RADIUS_TOL` of the radius, nearest the field's centre (measured
     blind: three wells 40 um apart at 1.6 um/px, whose inner walls' zones lie
@@ -409,8 +414,9 @@ def _wall_pair(col_score, width, min_width, radius_px=None):
     except ChamberNotFound as e:
         pair, err = None, e
     peaks = _zone_peaks(col_score)
+    own = _RADIUS_GAP if radius_px is None else max(_RADIUS_GAP, min(_OWN_ZONE * radius_px, 2 * _RADIUS_GAP))
     if radius_px is None or (pair is not None and abs(0.5 * (pair[1] - pair[0]) / radius_px - 1.0) <= _RADIUS_TOL
-                             and not any(pair[0] + _RADIUS_GAP < c < pair[1] - _RADIUS_GAP for c in peaks)):
+                             and not any(pair[0] + own < c < pair[1] - own for c in peaks)):
         if pair is None:
             raise err
         return pair

@@ -509,3 +509,35 @@ def test_the_levels_outside_a_wall_are_numpys():
         steps = np.diff(band, axis=1)
         steps = steps[np.isfinite(steps)]
         assert count == steps.size and diffs == pytest.approx(np.abs(steps).sum(), rel=1e-12)
+
+
+def test_a_walls_second_line_is_its_own_when_the_radius_pairs_the_walls():
+    """drawn_20261207_72 (inverted, an absorbing film and base, a neighbouring well 41 um away each side, 0.85
+    um/px): every wall's silhouette shows a second line 9-15 px inside it, a zone of its own between the chamber's
+    walls, so the pair of the strongest zones, of the chamber's radius, was refused and no other fitted: the look
+    was refused (ChamberNotFound, measured blind).  Zones within a tenth of the radius of a wall (at most 16 px)
+    are its own now.  Here the column score of four walls (the chamber's at 356 and 668, radius 156 px; the
+    neighbours' at 307 and 717, the right one's the strongest, as there) each with a narrow second line 13 px
+    inside it."""
+    x = np.arange(1024.0)
+    walls = [(307.0, 1), (356.0, -1), (668.0, 1), (717.0, -1)]
+    score = sum((1.2 if c == 717.0 else 1.0) * _zone(x, c, side) for c, side in walls)
+    score = score + sum(0.3 * np.exp(-0.5 * ((x - c + 13.0 * side) / 2.0) ** 2) for c, side in walls)
+    left, right = _wall_pair(2.0 * score, x.size, 40, radius_px=156.0)
+    assert abs(left - 356) <= 2 and abs(right - 668) <= 2
+    # a zone between the walls farther than that from both is not the wall's own: the view is refused as before
+    far = score + 0.5 * np.exp(-0.5 * ((x - 390.0) / 2.0) ** 2)
+    with pytest.raises(ChamberNotFound, match="other wall would lie"):
+        _wall_pair(2.0 * far, x.size, 40, radius_px=156.0)
+
+
+def test_drawn_72s_walls_are_found_through_their_second_lines():
+    """drawn_20261207_72's flat frame (rendered from its optics: the walls' second lines, the neighbours' wells 41
+    um away each side): with the chamber's radius, the chamber's walls within 0.5 px of the rendered well's (the
+    view was refused before, ChamberNotFound)."""
+    s = render_look("drawn_20261207_72", [0.0])
+    t, p = s.truth, s.truth.attrs["pixel_size"]
+    a, l0, h = (t.attrs[k] for k in ("chamber_radius", "membrane_thickness", "chamber_depth"))
+    w = find_walls(s.frames[0], l0 / p, depth_px=h / p, radius_px=a / p)
+    axis = t.attrs["anchor_col"]
+    assert abs(w.left - (axis - a / p)) < 0.5 and abs(w.right - (axis + a / p)) < 0.5
