@@ -1124,8 +1124,8 @@ class SilhouetteTracer:
         clip = None if raw is None else clip_mask(np.concatenate([raw[lo:hi, a:b] for a, b in spans], axis=1))
         clip0 = None if clip is None or self._clip0 is None else self._clip0[np.ix_(rows, moved)]
         n0 = 0 if clip0 is None else np.count_nonzero(clip0)
+        flat = np.rot90(self._flat, self.k)[np.ix_(rows, moved)].astype(float)  # (the first frame's crop)
         if clip is not None and np.count_nonzero(clip) > _CLIP_GROWTH * n0 + 3:
-            flat = np.rot90(self._flat, self.k)[np.ix_(rows, moved)].astype(float)
             at = (w0.left + int(round(dx)) - c0, w0.right + int(round(dx)) - c1)  # (the first frame's, crop columns)
             near = at
             if self.prev is not None and self.prev.geometry is not None:  # (the last ok frame's, this drift)
@@ -1134,11 +1134,10 @@ class SilhouetteTracer:
             w, share = self._shifted_walls(np.asarray(crop, float), flat, clip, clip0, top - lo, at, near)
         else:
             light = self._bg[np.ix_(rows, moved)]
-            add, gain = self._light_change(crop, rows, moved, light)
+            add, gain = self._light_change(crop, flat, rows, moved, light)
             light = light + add + gain * light
             # the first frame in this light: where this frame differs from it beyond the walls' shift (a particle
             # drifting past a wall), find_walls leaves the wall's rows out
-            flat = np.rot90(self._flat, self.k)[np.ix_(rows, moved)].astype(float)
             w = find_walls(crop, self.l0, depth_px=self.depth, top_row=top - lo, strip=_STRIP,
                            near=(left - c0, right - c1), light=light, reference=flat * (1.0 + gain) + add)
             share = 0.0
@@ -1226,13 +1225,13 @@ class SilhouetteTracer:
                                   f"was recorded (lower the exposure)")
         return SilhouetteWalls(float(top), float(base), cols[0], cols[1], max(rms)), max(shares)
 
-    def _light_change(self, crop, rows, moved, light):
-        """How much brighter this frame's light is than the first frame's over the walls' ``crop`` (view ``rows``
-        and ``moved`` columns of the first frame: the crop's less the drift to the pixel; ``light``: the first
-        frame's there): the planes ``(s, L - 1)`` over the crop, the light ``s + (L - 1) light`` brighter, fitted
-        to this frame less the first, ``s + (L - 1) flat`` (least squares over every ``_LIGHT_ROWS``-th
-        row, again without the pixels more than 3 scaled MADs off the first fit: the residue of the drift's
-        fraction of a px at the walls' edges, and the walls' own widening).
+    def _light_change(self, crop, flat, rows, moved, light):
+        """How much brighter this frame's light is than the first frame's over the walls' ``crop`` (``flat``: the
+        first frame's, view ``rows`` and ``moved`` columns: the crop's less the drift to the pixel; ``light``: the
+        first frame's light there): the planes ``(s, L - 1)`` over the crop, the light ``s + (L - 1) light``
+        brighter, fitted to this frame less the first, ``s + (L - 1) flat`` (least squares over every
+        ``_LIGHT_ROWS``-th row, again without the pixels more than 3 scaled MADs off the first fit: the residue of
+        the drift's fraction of a px at the walls' edges, and the walls' own widening).
 
         Stray light (a window, the room's lamps) adds ``s`` to the light the
         walls' half level is read against, a lamp brighter on one side scales
@@ -1243,7 +1242,7 @@ class SilhouetteTracer:
         (``wall_rms``).
         """
         sub = slice(None, None, _LIGHT_ROWS)
-        flat = np.rot90(self._flat, self.k)[np.ix_(rows[sub], moved)].astype(float)
+        flat = flat[sub]
         diff = (crop[sub] - flat).ravel()
         level = max(float(np.mean(light)), 1e-9)
         x = (moved - moved.mean()) / max(np.ptp(moved), 1)  # (scaled: the normal equations well conditioned)

@@ -182,7 +182,8 @@ def find_walls(frame, l0_px, *, strip=(0.15, 0.6), depth_px=None, min_width=40, 
         For a later frame, the first frame in this frame's light (its light's
         change put on): the rows of a wall where this frame differs from it
         beyond the wall's own shift are left out of the wall's line
-        (:func:`_changed_rows`: a particle drifting past).
+        (:func:`_changed_rows`: a particle drifting past).  Not read with
+        ``maps`` (a first frame).
 
     Raises
     ------
@@ -572,6 +573,9 @@ def _fit_walls(sd, peaks, r0, r1, top_row, base_row, pair=None):
     half-way between the silhouette zone's extreme and the light just outside
     the wall (4-12 px out): the local light, a mean over the zone as well,
     lies between them, so the level is not half of the deviation's peak.
+    ``pair``: a later frame's and its first frame's light over this frame's,
+    less 1 (:func:`find_walls`' ``reference``): the rows :func:`_changed_rows`
+    finds are left out of the lines.
     """
     cl, cr = sorted(peaks)
     rows = np.arange(r0, r1)
@@ -580,7 +584,7 @@ def _fit_walls(sd, peaks, r0, r1, top_row, base_row, pair=None):
     # the wall's zone lies inside the well: its outer edge is the wall (the left one walked in flipped columns)
     left = m - 1 - _wall_edges(strip[:, ::-1], m - 1 - cl)
     right = _wall_edges(strip, cr)
-    if pair is not None:  # (this frame's and the first frame's light over this frame's, less 1: see find_walls)
+    if pair is not None:
         gone = _changed_rows(pair[0][r0:r1], pair[1][r0:r1], left, right)
         left, right = (np.where(g, np.nan, u) for u, g in zip((left, right), gone, strict=True))
     fits, res = [], []

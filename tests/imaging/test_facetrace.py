@@ -353,7 +353,7 @@ def test_the_walls_light_change_is_stray_light_plus_a_lamps(edge_dark):
     level = light.mean()
     lamp, stray = 0.08 + 0.1 * x - 0.05 * y, level * (0.1 + 0.05 * x + 0.04 * y)
     def change(frame):
-        add, gain = tr._light_change(frame, rows, moved, light)  # (the planes s and L - 1)
+        add, gain = tr._light_change(frame, flat, rows, moved, light)  # (the planes s and L - 1)
         assert add.shape == gain.shape == flat.shape
         return add + gain * light
 
