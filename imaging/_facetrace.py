@@ -210,6 +210,18 @@ _LIGHT_ROWS = 4
 #: walls read in light the camera clipped (:meth:`SilhouetteTracer._shifted_walls`): the first frame's columns
 #: either side of each wall compared (px), the shifts tried (px, coarse then fine steps) and the rows of a band
 _SHIFT_HALF = 20
+#: ... and the wall's own neighbourhood: _SHIFT_HALF px outside it, _SHIFT_INSIDE inside (its zone); read from that
+#: alone when the wider window's misfit (RMS, the bands' median) is over _SHIFT_WORSE times it: the light inside the
+#: well changed since the first frame, not only by the light's gain and offset (the liquid diluted, the dome lit
+#: it).  Found blind on drawn_20261207_79 and _45 (dilution, the bright side clipped): the wider window's misfit
+#: 1.6-2.2x the narrow's, its rims 0.28-0.76 px small; the narrow's within 0.1 px of the unclipped frames'.  On the
+#: clipping tests' inverted (1.3x, 1.6x light) the ratio stays 1.04-1.14, and there the narrow window alone read a
+#: wall 0.64 px off (its wall lines clipped through their edge): the wider one is kept.  Over the presets and
+#: held-out looks under 7 light changes and drawn looks 0-95: 92 ok frames' rims changed, 82 nearer the truth (by
+#: up to 0.53 px), 10 further (by up to 0.09 px: drawn_20261207_62's frame 8, 1.39x exposure with 80 % of the view
+#: clipped, -0.45 -> -0.51 px)
+_SHIFT_INSIDE = 8
+_SHIFT_WORSE = 1.25
 _SHIFT_RANGE = 4.0
 _SHIFT_STEPS = (0.25, 0.01)
 _SHIFT_BAND = 10
@@ -866,6 +878,53 @@ def _shift_misfits(f, seen, y, flat, bad, cols, shifts):
     return out
 
 
+
+def _shifted_wall(crop, flat, clip, bad, j0, jn, off, rows):
+    """One wall of :meth:`SilhouetteTracer._shifted_walls` read over the window ``off`` (columns about the first
+    frame's wall ``j0``; ``jn``: this frame's expected): ``(ys, ws, misfit, near)``, the bands' middle rows, their
+    wall columns, the median of their least misfits (:func:`_shift_misfits`) and the bands' pixels within 3 px of
+    the wall clipped here or, shifted, in the first frame; None when the window leaves the crop.
+
+    ``crop``, ``flat``, ``clip``, ``bad``: this frame's walls' crop, the
+    first frame's (the drift to the pixel taken off) and their clipped
+    pixels; ``rows``: the first and last rows of the walls' strip.
+    """
+    reach = int(np.ceil(_SHIFT_RANGE)) + 1
+    coarse = np.arange(-_SHIFT_RANGE, _SHIFT_RANGE + 1e-9, _SHIFT_STEPS[0])
+    t_win = int(round(j0)) + off
+    if t_win[0] - reach < 0 or t_win[-1] + reach >= crop.shape[1]:
+        return None
+    moved = int(round(jn)) - int(round(j0))  # (whole px from the first frame's wall to the expected: from the top
+    # band on, each band's search starts from the last band's wall, so a wall leaning more than it did in the first
+    # frame is followed down)
+    ys, ws, misfits, near = [], [], [], []
+    r0, r1 = rows
+    for b0 in range(r0, r1 - _SHIFT_BAND // 2, _SHIFT_BAND):
+        b1 = min(b0 + _SHIFT_BAND, r1)
+        f_win = t_win + moved
+        if f_win[0] < 0 or f_win[-1] >= crop.shape[1]:
+            break
+        near.append((clip[b0:b1, f_win] | bad[b0:b1, t_win])[:, np.abs(off) <= 3])
+        f = crop[b0:b1, f_win]
+        seen = ~clip[b0:b1, f_win]
+        if np.count_nonzero(seen) < _SHIFT_SEEN * seen.size:
+            continue
+        y = np.broadcast_to((np.arange(b0, b1) - 0.5 * (b0 + b1 - 1))[:, None], f.shape)
+        e = _shift_misfits(f, seen, y, flat[b0:b1], bad[b0:b1], t_win, coarse)
+        k = int(np.argmin(e))
+        fine = np.arange(coarse[k] - _SHIFT_STEPS[0], coarse[k] + _SHIFT_STEPS[0] + 1e-9, _SHIFT_STEPS[1])
+        fine = fine[np.abs(fine) <= _SHIFT_RANGE]
+        e = _shift_misfits(f, seen, y, flat[b0:b1], bad[b0:b1], t_win, fine)
+        k = int(np.argmin(e))
+        if not np.isfinite(e[k]):
+            continue
+        d = fine[k] + (_vertex(e[k - 1], e[k], e[k + 1]) * _SHIFT_STEPS[1] if 0 < k < e.size - 1 else 0.0)
+        ys.append(0.5 * (b0 + b1 - 1))
+        ws.append(j0 + moved + d)
+        misfits.append(e[k])
+        moved += int(round(d))
+    return ys, ws, (float(np.sqrt(np.median(misfits))) if misfits else np.inf), near
+
 class SilhouetteTracer:
     """Follows one chamber seen by its silhouettes through a series (see the module's notes).
 
@@ -1159,8 +1218,8 @@ class SilhouetteTracer:
         it is too low and their edges move (measured: the inverted look, its
         light 1.6x, read 0.6 px off, ok; the same frames unclipped, within
         0.01 px; here within 0.13 px, or not found).  Per band of
-        ``_SHIFT_BAND`` rows of the walls' strip, and each column
-        ``_SHIFT_HALF`` px either side of the wall: this frame ``= a + b y + (c
+        ``_SHIFT_BAND`` rows of the walls' strip, and each column of a window
+        about the wall (:func:`_shifted_wall`): this frame ``= a + b y + (c
         + d y) flat(x - shift)`` (the light's change, linear down the band;
         ``flat`` linearly interpolated) by least squares over the pixels
         clipped neither here nor, shifted, in the first frame
@@ -1171,54 +1230,40 @@ class SilhouetteTracer:
         is 8.6 px out of the first frame's, its foot 2.3 px).  The bands'
         walls are fitted by a line down the strip and read at the base's top
         surface; their RMS about it is the walls' ``rms`` (over
-        ``MAX_WALL_RMS``: not found, as :func:`find_walls`).
+        ``MAX_WALL_RMS``: not found, as :func:`find_walls`).  Each wall is
+        read in two windows: ``_SHIFT_HALF`` px outside it and
+        ``_SHIFT_INSIDE`` inside (its edge and zone), and ``_SHIFT_HALF``
+        either side; the wider is taken unless its misfit is over
+        ``_SHIFT_WORSE`` times the narrower's (the light inside the well
+        changed otherwise than by the gain and offset fitted) or its line is
+        not straight.
         """
         base = top + self.l0
-        r0 = max(int(base + _STRIP[0] * self.depth), 0)
-        r1 = min(int(base + _STRIP[1] * self.depth), crop.shape[0])
-        half, reach = _SHIFT_HALF, int(np.ceil(_SHIFT_RANGE)) + 1
-        off = np.arange(-half, half + 1)
-        coarse = np.arange(-_SHIFT_RANGE, _SHIFT_RANGE + 1e-9, _SHIFT_STEPS[0])
-        bad_t = np.zeros(flat.shape, bool) if clip0 is None else clip0
+        rows = (max(int(base + _STRIP[0] * self.depth), 0), min(int(base + _STRIP[1] * self.depth), crop.shape[0]))
+        bad = np.zeros(flat.shape, bool) if clip0 is None else clip0
         cols, rms, shares = [], [], []
-        for j0, jn in zip(at, near, strict=True):
-            t_win = int(round(j0)) + off
-            if t_win[0] - reach < 0 or t_win[-1] + reach >= crop.shape[1]:
-                raise ChamberNotFound("a wall lies too near the crop's edge to be read in clipped light")
-            moved = int(round(jn)) - t_win[half]  # (whole px from the first frame's wall to the expected: from
-            # the top band on, each band's search starts from the last band's wall, so a wall leaning more than it
-            # did in the first frame is followed down)
-            ys, ws, near_clip = [], [], []
-            for b0 in range(r0, r1 - _SHIFT_BAND // 2, _SHIFT_BAND):
-                b1 = min(b0 + _SHIFT_BAND, r1)
-                f_win = t_win + moved
-                if f_win[0] < 0 or f_win[-1] >= crop.shape[1]:
-                    break
-                near_clip.append((clip[b0:b1, f_win] | bad_t[b0:b1, t_win])[:, np.abs(off) <= 3])
-                f = crop[b0:b1, f_win]
-                seen = ~clip[b0:b1, f_win]
-                if np.count_nonzero(seen) < _SHIFT_SEEN * seen.size:
-                    continue
-                y = np.broadcast_to((np.arange(b0, b1) - 0.5 * (b0 + b1 - 1))[:, None], f.shape)
-                e = _shift_misfits(f, seen, y, flat[b0:b1], bad_t[b0:b1], t_win, coarse)
-                k = int(np.argmin(e))
-                fine = np.arange(coarse[k] - _SHIFT_STEPS[0], coarse[k] + _SHIFT_STEPS[0] + 1e-9, _SHIFT_STEPS[1])
-                fine = fine[np.abs(fine) <= _SHIFT_RANGE]
-                e = _shift_misfits(f, seen, y, flat[b0:b1], bad_t[b0:b1], t_win, fine)
-                k = int(np.argmin(e))
-                if not np.isfinite(e[k]):
-                    continue
-                d = fine[k] + (_vertex(e[k - 1], e[k], e[k + 1]) * _SHIFT_STEPS[1] if 0 < k < e.size - 1 else 0.0)
-                ys.append(0.5 * (b0 + b1 - 1))
-                ws.append(j0 + moved + d)
-                moved += int(round(d))
-            shares.append(float(np.mean(np.concatenate(near_clip))) if near_clip else 1.0)
-            if len(ws) < 3:
+        for side, (j0, jn) in enumerate(zip(at, near, strict=True)):
+            reads = []  # (misfit, column, scatter, near_clip): the wall's own neighbourhood, then the wider window
+            for inside in (_SHIFT_INSIDE, _SHIFT_HALF):  # (outside is left of the left wall)
+                off = np.arange(-_SHIFT_HALF, inside + 1) if side == 0 else np.arange(-inside, _SHIFT_HALF + 1)
+                read = _shifted_wall(crop, flat, clip, bad, j0, jn, off, rows)
+                if read is None:
+                    raise ChamberNotFound("a wall lies too near the crop's edge to be read in clipped light")
+                ys, ws, misfit, near_clip = read
+                if len(ws) >= 3:
+                    fit = np.polyfit(ys, ws, 1)
+                    scatter = float(np.std(np.asarray(ws) - np.polyval(fit, ys)))
+                    reads.append((misfit, float(np.polyval(fit, base)), scatter, near_clip))
+            if not reads:
                 raise ChamberNotFound("a wall's profile is clipped over most of its rows: its edge is not seen "
                                       "in the light the camera recorded (lower the exposure)")
-            fit = np.polyfit(ys, ws, 1)
-            cols.append(float(np.polyval(fit, base)))
-            rms.append(float(np.std(np.asarray(ws) - np.polyval(fit, ys))))
+            held = [r for r in reads if r[2] <= MAX_WALL_RMS]
+            if len(held) == 2:  # (the wider window unless its misfit shows the light inside the well changed)
+                held = held[:1] if held[1][0] > _SHIFT_WORSE * held[0][0] else held[1:]
+            misfit, col, scatter, near_clip = (held or reads)[-1]
+            shares.append(float(np.mean(np.concatenate(near_clip))) if near_clip else 1.0)
+            cols.append(col)
+            rms.append(scatter)
         if max(rms) > MAX_WALL_RMS:  # (as find_walls: not straight walls)
             raise ChamberNotFound(f"the walls read in light the camera clipped are not straight lines (row "
                                   f"scatter {max(rms):.2f} px > {MAX_WALL_RMS} px): too little of their profile "

@@ -229,3 +229,57 @@ def test_the_silhouette_routes_clipped_share_is_the_true_walls_clipped_pixels():
     assert truth[0] == 0.0 and figure[0] == 0.0
     assert 0.2 < truth[1] < truth[2] - 0.05 and truth[2] < 0.8  # (the count tells the two relit frames apart)
     np.testing.assert_allclose(figure, truth, atol=0.04, rtol=0.0)
+
+
+def _wall_crops(inside_later, seed, gain=1.1, shift=0.7, clip_at=65535.0):
+    """A walls' crop (60 rows, 140 columns) of a first frame and a later one: the well's dark liquid between two
+    walls (columns 30 and 110, logistic edges 0.8 px wide) in a bright base, a brightening of the liquid 8-16 px
+    inside each wall (a halo of the well's side, of height 9000 counts in the first frame, ``inside_later`` of it in
+    the later: the liquid diluted), the later frame's walls ``shift`` px outwards, its light ``gain`` x and 500
+    counts more, noise of 200 counts, cut at ``clip_at``."""
+    rng = np.random.default_rng(seed)
+    x = np.arange(140.0)
+
+    def profile(left, right, inside):
+        dark = 10000.0 + inside * 9000.0 * (np.exp(-0.5 * ((x - left - 14.0) / 2.5) ** 2)
+                                            + np.exp(-0.5 * ((x - right + 14.0) / 2.5) ** 2))
+        out = 1.0 / (1.0 + np.exp((x - left) / 0.8)) + 1.0 / (1.0 + np.exp(-(x - right) / 0.8))
+        return dark + (60000.0 - dark) * np.minimum(out, 1.0)
+
+    first = np.tile(profile(30.0, 110.0, 1.0), (60, 1)) + rng.normal(0.0, 200.0, (60, 140))
+    later = 500.0 + gain * np.tile(profile(30.0 - shift, 110.0 + shift, inside_later), (60, 1))
+    later = np.minimum(later + rng.normal(0.0, 200.0, (60, 140)), clip_at)
+    return first, later, later >= clip_at
+
+
+@pytest.mark.parametrize("inside_later", [1.0, 0.2])
+def test_clipped_walls_are_read_from_their_own_neighbourhood_when_the_wells_light_changed(inside_later):
+    """SilhouetteTracer._shifted_walls on two walls moved 0.7 px outwards, their light 1.1x + 500 counts (the
+    base's 66500 clipped at 65535), 5 noise draws.  Where the well's liquid beside the walls kept its light, the
+    window 20 px either side and the wall's own neighbourhood (8 px inside it) fit alike (the wider's misfit 0.84-0.86
+    of the narrower's, under _SHIFT_WORSE) and the wider is read.  Where that light fell to 0.2 of the first
+    frame's (the liquid diluted: drawn_20261207_79 and _45 blind, rims 0.28-0.76 px small, ok), the wider window's
+    misfit is 5.9-6.5x the narrower's and the walls are read from their own neighbourhood.  Either way within
+    0.05 px of the truth (measured 0.00-0.035); the wider window alone, the rule before, read the changed walls
+    0.15-0.3 px in (measured 0.18-0.22)."""
+    from types import SimpleNamespace
+
+    from osmobulge.imaging import _facetrace as ft
+    from osmobulge.imaging._silhouette import MAX_WALL_RMS
+
+    tracer = SimpleNamespace(l0=10.0, depth=60.0)  # (the strip: rows 19-46, 0.15-0.6 of the depth below row 10)
+    for seed in range(5):
+        first, later, clip = _wall_crops(inside_later, seed)
+        assert 0.3 < clip.mean() < 0.45
+        w, share = ft.SilhouetteTracer._shifted_walls(tracer, later, first, clip, None, 0.0, (30.0, 110.0),
+                                                      (30.0, 110.0))
+        assert abs(w.left - 29.3) < 0.05 and abs(w.right - 110.7) < 0.05, (seed, w.left, w.right)
+        assert w.rms <= MAX_WALL_RMS and 0.05 < share < 0.15
+        reads = [ft._shifted_wall(later, first, clip, np.zeros_like(clip), 110.0, 110.0, off, (19, 46))
+                 for off in (np.arange(-8, 21), np.arange(-20, 21))]  # (the right wall: narrow, wide)
+        ratio = reads[1][2] / reads[0][2]
+        wide = np.polyval(np.polyfit(reads[1][0], reads[1][1], 1), 10.0)
+        if inside_later == 1.0:
+            assert ratio < ft._SHIFT_WORSE and abs(wide - 110.7) < 0.05, (seed, ratio, wide)
+        else:
+            assert ratio > ft._SHIFT_WORSE and 0.15 < abs(wide - 110.7) < 0.3, (seed, ratio, wide)
