@@ -226,9 +226,11 @@ _SHIFT_RANGE = 4.0
 _SHIFT_STEPS = (0.25, 0.01)
 _SHIFT_BAND = 10
 _SHIFT_SEEN = 0.1  # (the least share of a band's pixels recorded, not clipped, to read it)
-#: a frame's walls are read that way when their crop has more than this many times the first frame's clipped pixels
-#: (plus 3): inverted's wall lines, clipped in the first frame, clip 720-770 px of the 789 of the first in frames
-#: in the same light, and 1980-2010 with the light 1.05x
+#: a frame's walls are read in clipped light (their half level on the rows no clipped pixel can have moved,
+#: :func:`osmobulge.imaging._silhouette._moved_by_clip`; with under a third of the rows left, that way) when their
+#: crop has more than this many times the first frame's clipped pixels (plus 3): inverted's wall lines, clipped in
+#: the first frame, clip 720-770 px of the 789 of the first in frames in the same light, and 1980-2010 with the
+#: light 1.05x
 _CLIP_GROWTH = 1.1
 #: the film beyond each foot checked for a lift (:meth:`SilhouetteTracer._rim_contact`): ``_LIFT_SPAN`` film
 #: thicknesses (at least ``_LIFT_MIN_PX``) from ``_LIFT_GAP`` px past the foot, against the change ``_LIFT_FAR``
@@ -925,6 +927,15 @@ def _shifted_wall(crop, flat, clip, bad, j0, jn, off, rows):
         moved += int(round(d))
     return ys, ws, (float(np.sqrt(np.median(misfits))) if misfits else np.inf), near
 
+
+def _near_walls(clip, w, depth):
+    """The larger share, over the two walls ``w``, of the walls' strip's pixels within 3 px of the wall's column
+    that ``clip`` marks clipped (the figure ``clipped_share``)."""
+    r0, r1 = max(int(w.base_row + _STRIP[0] * depth), 0), min(int(w.base_row + _STRIP[1] * depth), clip.shape[0])
+    shares = [np.mean(clip[r0:r1, max(int(round(c)) - 3, 0) : int(round(c)) + 4]) if r1 > r0 else 0.0
+              for c in (w.left, w.right)]
+    return float(max(shares))
+
 class SilhouetteTracer:
     """Follows one chamber seen by its silhouettes through a series (see the module's notes).
 
@@ -1149,8 +1160,15 @@ class SilhouetteTracer:
     def _walls(self, img, rows_p, cols_p, raw=None):
         """This frame's walls, its drift (dx, dy) from the first frame (``rows_p``, ``cols_p``: its base's
         :func:`_profiles`) and the share of the walls' pixels the camera clipped (0 unless it clipped light the
-        first frame's was not: then :meth:`_shifted_walls` reads them; ``raw``: the view as recorded, ``img``
-        before its light's gain was divided out)."""
+        first frame's was not; ``raw``: the view as recorded, ``img`` before its light's gain was divided out).
+
+        In clipped light the walls are read by their half level on the rows
+        whose read no clipped pixel can have moved (clipping lowers only the
+        brightest pixels and keeps their order: those rows read as unclipped;
+        found blind on drawn_20261207_111, 2 um/px, 2-17 % of the walls'
+        pixels clipped, whose walls matched to the first frame's profile read
+        0.2 px in, lambda_pre 0.4-0.5 % off, ok); when under a third of a
+        wall's rows are left, by :meth:`_shifted_walls`."""
         # the drift: the base's row and column profiles (its mean over columns and over rows; the well's bottom
         # face and the walls) registered against the first frame's, each by phase correlation
         dy, dx = -self._reg_ref[0].shift(_deep(rows_p, self._reg_deep)), -self._reg_ref[1].shift(cols_p)
@@ -1184,28 +1202,35 @@ class SilhouetteTracer:
         clip0 = None if clip is None or self._clip0 is None else self._clip0[np.ix_(rows, moved)]
         n0 = 0 if clip0 is None else np.count_nonzero(clip0)
         flat = np.rot90(self._flat, self.k)[np.ix_(rows, moved)].astype(float)  # (the first frame's crop)
-        if clip is not None and np.count_nonzero(clip) > _CLIP_GROWTH * n0 + 3:
+        clipped = clip is not None and np.count_nonzero(clip) > _CLIP_GROWTH * n0 + 3
+        light = self._bg[np.ix_(rows, moved)]
+        add, gain = self._light_change(crop, flat, rows, moved, light)
+        light = light + add + gain * light
+        try:
+            # the first frame in this light: where this frame differs from it beyond the walls' shift (a particle
+            # drifting past a wall), find_walls leaves the wall's rows out; and the rows whose half level or
+            # crossing a clipped pixel may have moved (the other rows' read is exact)
+            w = find_walls(crop, self.l0, depth_px=self.depth, top_row=top - lo, strip=_STRIP,
+                           near=(left - c0, right - c1), light=light, reference=flat * (1.0 + gain) + add,
+                           clipped=clip if clipped else None)
+            share = _near_walls(clip, w, self.depth) if clipped else 0.0
+        except ChamberNotFound:
+            if not clipped:
+                raise
+            # too few rows left: the walls read by matching the first frame's profile over what was recorded
             at = (w0.left + int(round(dx)) - c0, w0.right + int(round(dx)) - c1)  # (the first frame's, crop columns)
             near = at
             if self.prev is not None and self.prev.geometry is not None:  # (the last ok frame's, this drift)
                 g, mx = self.prev.geometry, dx - self.prev.drift[0]
                 near = (g.line.x0 - g.rim_radius + mx - c0, g.line.x0 + g.rim_radius + mx - c1)
             w, share = self._shifted_walls(np.asarray(crop, float), flat, clip, clip0, top - lo, at, near)
-        else:
-            light = self._bg[np.ix_(rows, moved)]
-            add, gain = self._light_change(crop, flat, rows, moved, light)
-            light = light + add + gain * light
-            # the first frame in this light: where this frame differs from it beyond the walls' shift (a particle
-            # drifting past a wall), find_walls leaves the wall's rows out
-            w = find_walls(crop, self.l0, depth_px=self.depth, top_row=top - lo, strip=_STRIP,
-                           near=(left - c0, right - c1), light=light, reference=flat * (1.0 + gain) + add)
-            share = 0.0
         return replace(w, top_row=w.top_row + lo, base_row=w.base_row + lo, left=w.left + c0,
                        right=w.right + c1), dx, dy, share
 
     def _shifted_walls(self, crop, flat, clip, clip0, top, at, near):
-        """The walls of a frame with more light clipped than the first frame (:data:`_CLIP_GROWTH`), read by
-        matching the first frame's profile across each wall over the pixels this frame recorded; and the larger
+        """The walls of a frame with more light clipped than the first frame (:data:`_CLIP_GROWTH`) over most
+        of their rows (:meth:`_walls`), read by matching the first frame's profile across each wall over the
+        pixels this frame recorded; and the larger
         share, over the two walls, of the pixels within 3 px of a wall left out as clipped.
 
         ``crop``: this frame's walls' crop; ``flat``: the first frame's, the

@@ -142,7 +142,7 @@ def _scaled_deviation(img, bg):
 
 def find_walls(frame, l0_px, *, strip=(0.15, 0.6), depth_px=None, min_width=40, top_row=None,
                near=None, top_near=None, light=None, maps=None, radius_px=None,
-               reference=None) -> SilhouetteWalls:
+               reference=None, clipped=None) -> SilhouetteWalls:
     """Find the top face and the two walls of the central well in a flat, bulge-up frame.
 
     Parameters
@@ -184,6 +184,10 @@ def find_walls(frame, l0_px, *, strip=(0.15, 0.6), depth_px=None, min_width=40, 
         beyond the wall's own shift are left out of the wall's line
         (:func:`_changed_rows`: a particle drifting past).  Not read with
         ``maps`` (a first frame).
+    clipped : ndarray of bool, shape (M, N), optional
+        The pixels the camera clipped: a wall's rows whose read a clipped
+        pixel may have moved are left out (:func:`_moved_by_clip`).  Not read
+        with ``maps``.
 
     Raises
     ------
@@ -231,7 +235,13 @@ def find_walls(frame, l0_px, *, strip=(0.15, 0.6), depth_px=None, min_width=40, 
             raise ValueError(f"reference has shape {ref.shape}, the frame {img.shape}")
         lit = np.maximum(bg, 1e-9)
         pair = (img / lit - 1.0, ref / lit - 1.0)
-    return _fit_walls(sd, peaks, r0, r1, top_row, base_row, pair)
+    if clipped is not None and maps is None:
+        clipped = np.asarray(clipped, bool)
+        if clipped.shape != img.shape:
+            raise ValueError(f"clipped has shape {clipped.shape}, the frame {img.shape}")
+    else:
+        clipped = None
+    return _fit_walls(sd, peaks, r0, r1, top_row, base_row, pair, clipped)
 
 
 def _zone_scores(d, base_row, depth, strip):
@@ -566,7 +576,7 @@ def neighbour_walls(maps, k, w, depth_px, strip=(0.15, 0.6), min_width=40):
     return tuple(out)
 
 
-def _fit_walls(sd, peaks, r0, r1, top_row, base_row, pair=None):
+def _fit_walls(sd, peaks, r0, r1, top_row, base_row, pair=None, clipped=None):
     """Each wall's outer half-level edge row by row, fitted by a line and read at ``base_row``.
 
     ``sd``: the signed relative deviation from the local light.  The level is
@@ -575,7 +585,8 @@ def _fit_walls(sd, peaks, r0, r1, top_row, base_row, pair=None):
     lies between them, so the level is not half of the deviation's peak.
     ``pair``: a later frame's and its first frame's light over this frame's,
     less 1 (:func:`find_walls`' ``reference``): the rows :func:`_changed_rows`
-    finds are left out of the lines.
+    finds are left out of the lines; ``clipped``: the pixels the camera
+    clipped (the rows :func:`_moved_by_clip` finds are left out).
     """
     cl, cr = sorted(peaks)
     rows = np.arange(r0, r1)
@@ -587,9 +598,15 @@ def _fit_walls(sd, peaks, r0, r1, top_row, base_row, pair=None):
     if pair is not None:
         gone = _changed_rows(pair[0][r0:r1], pair[1][r0:r1], left, right)
         left, right = (np.where(g, np.nan, u) for u, g in zip((left, right), gone, strict=True))
+    if clipped is not None:  # (the left wall walked in flipped columns, as its edges were found)
+        cut = clipped[r0:r1]
+        left = np.where(_moved_by_clip(cut[:, ::-1], m - 1 - left, m - 1 - cl), np.nan, left)
+        right = np.where(_moved_by_clip(cut, right, cr), np.nan, right)
     fits, res = [], []
     for u in (left, right):
         at, rms, n = _clipped_line(rows.astype(float), u, float(base_row))
+        if clipped is not None and n < max(5, (r1 - r0) / 3):
+            raise ChamberNotFound(f"the camera clipped a wall's silhouette on all but {n} of its {r1 - r0} rows")
         if n < 5:
             raise ChamberNotFound("a wall's silhouette edge could not be followed down the base")
         fits.append(float(at))
@@ -599,6 +616,33 @@ def _fit_walls(sd, peaks, r0, r1, top_row, base_row, pair=None):
                               f"{MAX_WALL_RMS} px): not walls, or a look this search cannot read")
     return SilhouetteWalls(float(top_row), float(base_row), fits[0], fits[1], max(res))
 
+
+
+def _moved_by_clip(clipped, edge, c):
+    """The rows whose :func:`_wall_edges` read a clipped pixel may have moved (``clipped``: the strip's rows,
+    walking outwards to higher columns as ``edge`` was found from the zone at ``c``).
+
+    The half level lies half-way between the zone's extreme (within 3 px
+    of ``c``) and the median of the light 4-12 px beyond the edge; the
+    edge is where the light crosses it between two pixels.  Clipping only
+    lowers the brightest pixels and keeps their order, so the read is
+    exact unless a clipped pixel is the zone's extreme (any within 3 px of
+    ``c``), one of the two the crossing lies between, or the median beyond
+    (half or more of those pixels clipped).
+    """
+    n, m = clipped.shape
+    out = np.ones(n, bool)
+    for i in range(n):
+        e = edge[i]
+        if not np.isfinite(e):
+            continue
+        j = int(np.floor(e))
+        zone = clipped[i, max(c - 3, 0) : min(c + 4, m)]
+        cross = clipped[i, max(j, 0) : min(j + 2, m)]
+        k = int(np.rint(e))
+        beyond = clipped[i, min(max(k + 4, 0), m) : min(k + 13, m)]
+        out[i] = zone.any() or cross.any() or (beyond.size > 0 and 2 * np.count_nonzero(beyond) >= beyond.size)
+    return out
 
 def _changed_rows(now, then, left, right):
     """The rows of each wall (``left``, ``right``: its edges, :func:`_wall_edges`) where this frame changed since the
