@@ -15,10 +15,13 @@ them again with the clipped pixels :data:`BRIGHTER` and flags the frame
 ``clipped`` when they move more than :data:`MOVED_FLAG` px.
 
 The silhouette route reads the walls of a frame with more clipped light than
-its first frame by matching the first frame's profile across them over the
-pixels recorded (``SilhouetteTracer._shifted_walls``, which uses
-:func:`clip_mask`): the re-read above does not tell its right frames from its
-wrong ones there (it moves both 0.2-0.5 px).
+its first frame on the rows whose half-level read no clipped pixel can have
+moved (``osmobulge.imaging._silhouette._moved_by_clip``: clipping keeps the
+pixels' order), or with too few of those by matching the first frame's
+profile across them over the pixels recorded
+(``SilhouetteTracer._shifted_walls``; both use :func:`clip_mask`): the
+re-read above does not tell its right frames from its wrong ones there (it
+moves both 0.2-0.5 px).
 
 Only the top is a clip: a dark pixel at 0 is light near none, which a level
 read from it does not miss by more than the noise.

@@ -54,8 +54,9 @@ _FIGURES = {
                      "light the frame did not record (0: no clipped pixel at the walls)"),
     "clipped_share": ("1", "silhouette route: the share of the pixels within 3 px of a wall (the larger wall) the "
                            "camera clipped, in this frame or the first, in a frame with more of the walls' light "
-                           "clipped than the first (its walls read by matching the first frame's profile across "
-                           "them over the pixels recorded); 0 in the others"),
+                           "clipped than the first (its walls read on the rows no clipped pixel can have moved, or "
+                           "with too few of those by matching the first frame's profile across them over the "
+                           "pixels recorded); 0 in the others"),
     "light_tilt": ("1", "silhouette route: how much the light changed across the view since the first frame (the "
                         "range of a plane through the water's change; divided out of a frame whose noise it raised "
                         "by over 25 %)"),

@@ -389,8 +389,21 @@ DRAWN_BATCHES = {
     # bright side clipped, read by the profile match: rims 0.28-0.34 px small, lambda_pre 0.30-0.38 %, the clipped
     # walls of look 45); look 76's 2 touching frames flagged; false flags: look 73 frames 1, 2, 4 least_bend, look
     # 78 frames 6-8 no_membrane (wall_rms).  Looks 80-87, measured once at stop 46 (e2cdaf8): 72 of 72 frames ok,
-    # 0 silent, worst 0.55 of the tolerance, rims within 0.19 px
-    20261207: 88,
+    # 0 silent, worst 0.55 of the tolerance, rims within 0.19 px.  Since (stop 47), the clipped walls of looks 45
+    # and 79 read within 0.1 px of their unclipped frames (_facetrace._SHIFT_INSIDE), 0 silent.  Looks 88-95,
+    # measured once at stop 47 (5093f5b): 72 of 72 ok, 0 silent, worst 0.59 of the tolerance, rims within 0.29 px.
+    # Looks 96-103 (08b5f51): 60 of 72 ok, the truth's 10 touching frames flagged (looks 98 and 99 a frame early
+    # too); 12 SILENT: look 100 frames 3-8 (its exposure up 29 %, the walls' light clipped over most of their rows:
+    # the profile match's gain and shift trade off, rims 0.24-0.68 px small, lambda_pre 0.34-0.94 %; with the true
+    # gain put in within 0.05 px) and look 103 frames 3-8 (no clipping: the liquid diluting changed the walls'
+    # silhouette, the elastomer 1.408 against the liquid 1.362, its zone 10-16 % deeper than the first frame's, the
+    # rims 0.33 px in from the first frame's, lambda_pre 0.35 %; rendered without dilution within 0.1 %).  Looks
+    # 104-111 (08b5f51): look 104 refused (8-bit, inverted, 1.8 % noise at 0.8 um/px: the true orientation's well
+    # bottom taken as two wells'; ChamberNotFound names the ways in); of the other 63 frames 49 ok, the truth's 12
+    # touching frames flagged (looks 105 and 107 a frame early too), worst 0.51 of the tolerance; 3 SILENT: look 111
+    # frames 2-4 (2 um/px, 2-17 % of the walls' pixels clipped, the profile match 0.2 px in, lambda_pre 0.42-0.54 %;
+    # mended since: the clipped walls read on the rows no clipped pixel can have moved, within 0.13 %)
+    20261207: 112,
 }
 
 
