@@ -880,7 +880,6 @@ def _shift_misfits(f, seen, y, flat, bad, cols, shifts):
     return out
 
 
-
 def _shifted_wall(crop, flat, clip, bad, j0, jn, off, rows):
     """One wall of :meth:`SilhouetteTracer._shifted_walls` read over the window ``off`` (columns about the first
     frame's wall ``j0``; ``jn``: this frame's expected): ``(ys, ws, misfit, near)``, the bands' middle rows, their
@@ -935,6 +934,7 @@ def _near_walls(clip, w, depth):
     shares = [np.mean(clip[r0:r1, max(int(round(c)) - 3, 0) : int(round(c)) + 4]) if r1 > r0 else 0.0
               for c in (w.left, w.right)]
     return float(max(shares))
+
 
 class SilhouetteTracer:
     """Follows one chamber seen by its silhouettes through a series (see the module's notes).

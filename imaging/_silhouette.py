@@ -617,7 +617,6 @@ def _fit_walls(sd, peaks, r0, r1, top_row, base_row, pair=None, clipped=None):
     return SilhouetteWalls(float(top_row), float(base_row), fits[0], fits[1], max(res))
 
 
-
 def _moved_by_clip(clipped, edge, c):
     """The rows whose :func:`_wall_edges` read a clipped pixel may have moved (``clipped``: the strip's rows,
     walking outwards to higher columns as ``edge`` was found from the zone at ``c``).
@@ -628,7 +627,9 @@ def _moved_by_clip(clipped, edge, c):
     lowers the brightest pixels and keeps their order, so the read is
     exact unless a clipped pixel is the zone's extreme (any within 3 px of
     ``c``), one of the two the crossing lies between, or the median beyond
-    (half or more of those pixels clipped).
+    (half or more of those pixels clipped; the pixels beyond are counted
+    from the first crossing, half-way to the light, which may lie a pixel
+    off the edge: each of the three windows a pixel apart is checked).
     """
     n, m = clipped.shape
     out = np.ones(n, bool)
@@ -640,9 +641,10 @@ def _moved_by_clip(clipped, edge, c):
         zone = clipped[i, max(c - 3, 0) : min(c + 4, m)]
         cross = clipped[i, max(j, 0) : min(j + 2, m)]
         k = int(np.rint(e))
-        beyond = clipped[i, min(max(k + 4, 0), m) : min(k + 13, m)]
-        out[i] = zone.any() or cross.any() or (beyond.size > 0 and 2 * np.count_nonzero(beyond) >= beyond.size)
+        beyond = [clipped[i, min(max(k + o + 4, 0), m) : min(max(k + o + 13, 0), m)] for o in (-1, 0, 1)]
+        out[i] = zone.any() or cross.any() or any(b.size > 0 and 2 * np.count_nonzero(b) >= b.size for b in beyond)
     return out
+
 
 def _changed_rows(now, then, left, right):
     """The rows of each wall (``left``, ``right``: its edges, :func:`_wall_edges`) where this frame changed since the
