@@ -402,8 +402,11 @@ DRAWN_BATCHES = {
     # bottom taken as two wells'; ChamberNotFound names the ways in); of the other 63 frames 49 ok, the truth's 12
     # touching frames flagged (looks 105 and 107 a frame early too), worst 0.51 of the tolerance; 3 SILENT: look 111
     # frames 2-4 (2 um/px, 2-17 % of the walls' pixels clipped, the profile match 0.2 px in, lambda_pre 0.42-0.54 %;
-    # mended since: the clipped walls read on the rows no clipped pixel can have moved, within 0.13 %)
-    20261207: 112,
+    # mended since: the clipped walls read on the rows no clipped pixel can have moved, within 0.13 %).  Looks
+    # 112-119, measured once at stop 47 (ccff1a1): 55 of 72 ok, 0 silent, worst 0.45 of the tolerance, rims within
+    # 0.27 px; the truth's 12 touching frames flagged (looks 112 and 115 a frame early too); look 117 frames 6-8
+    # dome_contrast (8-bit, stray light growing to 24 % of full scale: the dome's flank in clipped light), false
+    20261207: 120,
 }
 
 
