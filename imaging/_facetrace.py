@@ -927,10 +927,16 @@ def _shifted_wall(crop, flat, clip, bad, j0, jn, off, rows):
     return ys, ws, (float(np.sqrt(np.median(misfits))) if misfits else np.inf), near
 
 
+def _strip_rows(base, depth, n):
+    """The first and last (exclusive) rows of the walls' strip (``_STRIP`` of the well's ``depth`` px below the
+    base's top surface, row ``base``) within a crop of ``n`` rows."""
+    return max(int(base + _STRIP[0] * depth), 0), min(int(base + _STRIP[1] * depth), n)
+
+
 def _near_walls(clip, w, depth):
     """The larger share, over the two walls ``w``, of the walls' strip's pixels within 3 px of the wall's column
     that ``clip`` marks clipped (the figure ``clipped_share``)."""
-    r0, r1 = max(int(w.base_row + _STRIP[0] * depth), 0), min(int(w.base_row + _STRIP[1] * depth), clip.shape[0])
+    r0, r1 = _strip_rows(w.base_row, depth, clip.shape[0])
     shares = [np.mean(clip[r0:r1, max(int(round(c)) - 3, 0) : int(round(c)) + 4]) if r1 > r0 else 0.0
               for c in (w.left, w.right)]
     return float(max(shares))
@@ -1264,7 +1270,7 @@ class SilhouetteTracer:
         not straight.
         """
         base = top + self.l0
-        rows = (max(int(base + _STRIP[0] * self.depth), 0), min(int(base + _STRIP[1] * self.depth), crop.shape[0]))
+        rows = _strip_rows(base, self.depth, crop.shape[0])
         bad = np.zeros(flat.shape, bool) if clip0 is None else clip0
         cols, rms, shares = [], [], []
         for side, (j0, jn) in enumerate(zip(at, near, strict=True)):
@@ -1285,7 +1291,7 @@ class SilhouetteTracer:
             held = [r for r in reads if r[2] <= MAX_WALL_RMS]
             if len(held) == 2:  # (the wider window unless its misfit shows the light inside the well changed)
                 held = held[:1] if held[1][0] > _SHIFT_WORSE * held[0][0] else held[1:]
-            misfit, col, scatter, near_clip = (held or reads)[-1]
+            _, col, scatter, near_clip = (held or reads)[-1]
             shares.append(float(np.mean(np.concatenate(near_clip))) if near_clip else 1.0)
             cols.append(col)
             rms.append(scatter)
