@@ -47,6 +47,8 @@ edge's), as a multi-position series revisiting its positions or a bumped stage.
 ranges (:func:`osmobulge.imaging.looks.drawn_look`; the batch defaults to
 today's date, so a new day's batch is new held-out looks nobody has tuned on;
 the batches measured are kept in ``DRAWN_BATCHES``) instead of the named ones.
+The options above that set a nuisance override a look's own only when given: a drawn look keeps its drawn
+stamp, focus drift, particles and light changes (until 2026-12-08 their defaults zeroed them).
 """
 
 from __future__ import annotations
@@ -80,18 +82,21 @@ def _as_jpeg(frames, quality):
     return np.stack(out)
 
 
-def _nuisances(name, n, events=None, stamp="none", focus_drift=0.0, debris=0, light_drift=0.0, stray_light=0.0,
-               exposure_drift=0.0):
-    """The look's nuisances with the events of ``--events`` in a series of n frames, the ``--stamp``, the
-    ``--focus-drift`` (m; none for a painted look), the ``--debris``, the ``--light-drift``, the
-    ``--stray-light`` and the ``--exposure-drift``."""
+def _nuisances(name, n, events=None, stamp=None, focus_drift=None, debris=None, light_drift=None, stray_light=None,
+               exposure_drift=None):
+    """The look's nuisances with the events of ``--events`` in a series of n frames and those of the options given
+    (not None): the ``--stamp``, the ``--focus-drift`` (m; none for a painted look), the ``--debris``, the
+    ``--light-drift``, the ``--stray-light`` and the ``--exposure-drift``.  An option not given keeps the look's
+    own (a drawn look's light changes, particles, focus drift and stamp)."""
     look = get_look(name)
     torn = {} if events is None else {"delaminated_frames": (n // 3,), "fractured_frames": (n // 2, n - 2), **{
         "gap": {"fracture_gap": 0.15}, "polar": {"fracture_gap": 0.4},
         "collapsed": {"fracture_mode": "collapsed"}}[events]}
-    focus = focus_drift if look.optics is not None else 0.0
-    return replace(look.nuisances, time_stamp=stamp, focus_drift=focus, debris=debris, light_drift=light_drift,
-                   stray_light=stray_light, exposure_drift=exposure_drift, **torn)
+    if look.optics is None and focus_drift is not None:
+        focus_drift = 0.0
+    given = {"time_stamp": stamp, "focus_drift": focus_drift, "debris": debris, "light_drift": light_drift,
+             "stray_light": stray_light, "exposure_drift": exposure_drift}
+    return replace(look.nuisances, **{k: v for k, v in given.items() if v is not None}, **torn)
 
 
 def _jumped(frames, amplitude, seed=5):
@@ -105,8 +110,8 @@ def _jumped(frames, amplitude, seed=5):
                      for f, d in zip(frames, shifts, strict=True)])
 
 
-def row(name, vt, events=None, stamp="none", focus_drift=0.0, dilution=False, jpeg=None, debris=0, light_drift=0.0,
-        stray_light=0.0, exposure_drift=0.0, stage_jumps=0.0):
+def row(name, vt, events=None, stamp=None, focus_drift=None, dilution=False, jpeg=None, debris=None,
+        light_drift=None, stray_light=None, exposure_drift=None, stage_jumps=0.0):
     t0 = time.perf_counter()
     optics = get_look(name).optics
     if optics is not None and dilution:
@@ -142,22 +147,23 @@ def main():
     ap.add_argument("--held-out-only", action="store_true")
     ap.add_argument("--events", choices=("gap", "polar", "collapsed"),
                     help="draw a delaminated and two torn frames in each look (see the module's docstring)")
-    ap.add_argument("--stamp", choices=("none", "tl", "tr", "bl", "br"), default="none",
-                    help="burn a time stamp into that corner of every frame and a scale bar into a bottom one")
-    ap.add_argument("--focus-drift", type=float, default=0.0, metavar="UM",
+    ap.add_argument("--stamp", choices=("none", "tl", "tr", "bl", "br"),
+                    help="burn a time stamp into that corner of every frame and a scale bar into a bottom one "
+                         "(each option not given keeps the look's own: a drawn look's)")
+    ap.add_argument("--focus-drift", type=float, metavar="UM",
                     help="the focal plane's travel (um) from the first frame to the last (optics looks)")
     ap.add_argument("--dilution", action="store_true",
                     help="the salt solution diluted by the water that came in (optics looks)")
     ap.add_argument("--jpeg", type=int, metavar="Q", help="read the frames as 8-bit JPEGs at quality Q (1-95)")
-    ap.add_argument("--debris", type=int, default=0, metavar="N",
+    ap.add_argument("--debris", type=int, metavar="N",
                     help="N particles drifting in the water in every frame after the first")
     ap.add_argument("--start", type=float, default=0.0, metavar="V0",
                     help="the first frame's Vtilde (a series that starts bulged)")
-    ap.add_argument("--light-drift", type=float, default=0.0, metavar="D",
+    ap.add_argument("--light-drift", type=float, metavar="D",
                     help="the light's gradient across the field changes by D from the first frame to the last")
-    ap.add_argument("--stray-light", type=float, default=0.0, metavar="S",
+    ap.add_argument("--stray-light", type=float, metavar="S",
                     help="stray light growing to S of full scale on one side by the last frame")
-    ap.add_argument("--exposure-drift", type=float, default=0.0, metavar="D",
+    ap.add_argument("--exposure-drift", type=float, metavar="D",
                     help="the exposure turned up to 1 + D by the last frame (light over the full scale clips)")
     ap.add_argument("--stage-jumps", type=float, default=0.0, metavar="A",
                     help="move every frame after the first by a random (rows, columns) within +-A px")
@@ -181,20 +187,21 @@ def main():
         groups.append(("outside the method (must be refused with a reason)", OUTSIDE_LOOKS))
     for title, looks in groups:
         events = "" if args.events is None else f" (events: {args.events})"
-        events += "" if args.stamp == "none" else f" (time stamp: {args.stamp})"
-        events += "" if args.focus_drift == 0.0 else f" (focus drift: {args.focus_drift:+g} um)"
+        events += "" if args.stamp is None else f" (time stamp: {args.stamp})"
+        events += "" if args.focus_drift is None else f" (focus drift: {args.focus_drift:+g} um)"
         events += " (liquid diluted)" if args.dilution else ""
         events += "" if args.jpeg is None else f" (JPEG, quality {args.jpeg})"
-        events += "" if not args.debris else f" (debris: {args.debris} a frame)"
+        events += "" if args.debris is None else f" (debris: {args.debris} a frame)"
         events += "" if not args.start else f" (first frame at Vtilde {args.start:g})"
-        events += "" if not args.light_drift else f" (light's gradient drifting by {args.light_drift:g})"
-        events += "" if not args.stray_light else f" (stray light to {args.stray_light:g} of full scale)"
-        events += "" if not args.exposure_drift else f" (exposure to {1 + args.exposure_drift:g}x)"
+        events += "" if args.light_drift is None else f" (light's gradient drifting by {args.light_drift:g})"
+        events += "" if args.stray_light is None else f" (stray light to {args.stray_light:g} of full scale)"
+        events += "" if args.exposure_drift is None else f" (exposure to {1 + args.exposure_drift:g}x)"
         events += "" if not args.stage_jumps else f" (stage jumps within +-{args.stage_jumps:g} px)"
         print(f"\n## {title}{events}: Vtilde {', '.join(f'{x:.2f}' for x in vt)}\n")
         print(head)
         for name in looks:
-            print(row(name, vt, args.events, args.stamp, args.focus_drift * 1e-6, args.dilution, args.jpeg,
+            focus = None if args.focus_drift is None else args.focus_drift * 1e-6
+            print(row(name, vt, args.events, args.stamp, focus, args.dilution, args.jpeg,
                       args.debris, args.light_drift, args.stray_light, args.exposure_drift, args.stage_jumps),
                   flush=True)
 
