@@ -201,6 +201,15 @@ _LEVEL_NOISE = 2.0
 _FACES_KEPT = 0.5
 #: the gap (px) beside which rows with none seen are rows where the faces met (:meth:`SilhouetteTracer._gap_rows`)
 _GAP_CLOSED = 2.0
+#: a dome whose gap to a neighbour's fell under the touching flag's stays that near while its volume keeps over
+#: _PARTED_VOLUME of that frame's (growing domes do not part; a dome that lost more collapsed or tore:
+#: :meth:`SilhouetteTracer._finish`)
+_PARTED_VOLUME = 0.9
+#: clipped pixels of the first frame in the base's registration window on under these shares of its columns and of
+#: its rows are an annotation burned in (:func:`_unannotated`): narrow, as a scale bar or a stamp's digits are (light
+#: clipped by the lamp spans the base), and leaving a quarter of the rows or more to read the columns' drift on
+#: (drawn_20261207_128, 2 um/px, a scale bar and its label: 6 % of the columns, 44 % of the window's 82 rows)
+_ANNOTATION_COLS, _ANNOTATION_ROWS = 0.25, 0.75
 #: how far (px) from the last ok frame's dome the light's plane is not fitted (:meth:`_near_last_dome`)
 _DOME_ZONE_PX = 40.0
 #: the light's change over the walls' crop is fitted on every _LIGHT_ROWS-th row of it
@@ -328,6 +337,27 @@ def _profiles(img):
     c /= h
     level = r.mean()
     return r - level, c - c.mean(), level
+
+
+def _unannotated(clipped):
+    """The rows and the columns of the registration window (``clipped``: its pixels at the camera's clip level in
+    the first frame, or None) free of them, when they are an annotation burned into the frames (a scale bar, a
+    time stamp's digits: on under ``_ANNOTATION_COLS`` of the window's columns and ``_ANNOTATION_ROWS`` of its
+    rows); None else (no clipped pixel, or light clipped over much of the base: all kept).
+
+    Burned in at the full scale, an annotation does not move with the stage:
+    in the base's profiles it pulls the drift read towards none.  Found
+    blind on drawn_20261207_128 (2 um/px, a scale bar in the bottom corner
+    inside the window): the top face 0.9 px off in every frame (1.7x the
+    volume's tolerance at Vtilde 0.18, ok), the full search's lowest rays then
+    on the film's fringes beyond the dome (16 % over at Vtilde 4, ok).
+    """
+    if clipped is None or not clipped.any():
+        return None
+    rows, cols = clipped.any(axis=1), clipped.any(axis=0)
+    if cols.mean() >= _ANNOTATION_COLS or rows.mean() >= _ANNOTATION_ROWS:
+        return None
+    return ~rows, ~cols
 
 
 def _deep(rows_p, start):
@@ -1041,6 +1071,8 @@ class SilhouetteTracer:
         self._lim = None  # (per row, the columns the dome is searched for between, once a gap was measured)
         self._lim_next = None  # (this frame's measured ones, for the next frame)
         self._side_seen = None  # (the first frame a dome came in at the field's side in, :meth:`_side_gap`)
+        self._touched = None  # (the last frame whose dome came within the touching flag of a neighbour's: its
+        # index, gap and volume, :meth:`_finish`)
         # (the flat frame's specks above the top face: not a neighbour's dome, :meth:`_neighbour_gap`,
         # :meth:`_side_gap`; mapped when first asked for, :meth:`_clear_of_specks`)
         top = max(int(w.top_row), 1)
@@ -1067,7 +1099,8 @@ class SilhouetteTracer:
         self._reg_rows = (int(np.ceil(w.base_row + 5)), min(int(w.base_row + self.depth) + 40, img.shape[0]))
         self._reg_deep = min(int(np.ceil(max(0.5 * self.depth - 5.0, 0.0))),
                              (self._reg_rows[1] - self._reg_rows[0]) // 2)
-        rows_p, cols_p, self._reg_level = _profiles(img[slice(*self._reg_rows)])
+        self._reg_keep = _unannotated(None if self._clip0 is None else self._clip0[slice(*self._reg_rows)])
+        rows_p, cols_p, self._reg_level = self._reg_profiles(img)
         self._reg_ref = (_Shift1D(_deep(rows_p, self._reg_deep)), _Shift1D(cols_p))
         self.prev = None
         self._edge_reached = (None, np.inf)  # the last frame with a dome and its margin to the field's edge, px
@@ -1163,10 +1196,21 @@ class SilhouetteTracer:
                                wall_rms=float(w.rms))
 
     # ---------------------------------------------------------------------- one frame
+    def _reg_profiles(self, img):
+        """The registration window's (:attr:`_reg_rows` of the view ``img``) :func:`_profiles`: the row profile
+        and the level over the columns :func:`_unannotated` keeps, the column profile over the rows it keeps."""
+        win = img[slice(*self._reg_rows)]
+        if self._reg_keep is None:
+            return _profiles(win)
+        rows_keep, cols_keep = self._reg_keep
+        rows_p, _, level = _profiles(win[:, cols_keep])
+        return rows_p, _profiles(win[rows_keep])[1], level
+
     def _walls(self, img, rows_p, cols_p, raw=None):
         """This frame's walls, its drift (dx, dy) from the first frame (``rows_p``, ``cols_p``: its base's
-        :func:`_profiles`) and the share of the walls' pixels the camera clipped (0 unless it clipped light the
-        first frame's was not; ``raw``: the view as recorded, ``img`` before its light's gain was divided out).
+        :func:`_profiles`), the share of the walls' pixels the camera clipped (0 unless it clipped light the
+        first frame's was not; ``raw``: the view as recorded, ``img`` before its light's gain was divided out) and
+        the figure ``wall_misfit`` when the walls were matched to the first frame's profile (else 1).
 
         In clipped light the walls are read by their half level on the rows
         whose read no clipped pixel can have moved (clipping lowers only the
@@ -1219,7 +1263,7 @@ class SilhouetteTracer:
             w = find_walls(crop, self.l0, depth_px=self.depth, top_row=top - lo, strip=_STRIP,
                            near=(left - c0, right - c1), light=light, reference=flat * (1.0 + gain) + add,
                            clipped=clip if clipped else None)
-            share = _near_walls(clip, w, self.depth) if clipped else 0.0
+            share, misfit = (_near_walls(clip, w, self.depth) if clipped else 0.0), 1.0
         except ChamberNotFound:
             if not clipped:
                 raise
@@ -1229,15 +1273,16 @@ class SilhouetteTracer:
             if self.prev is not None and self.prev.geometry is not None:  # (the last ok frame's, this drift)
                 g, mx = self.prev.geometry, dx - self.prev.drift[0]
                 near = (g.line.x0 - g.rim_radius + mx - c0, g.line.x0 + g.rim_radius + mx - c1)
-            w, share = self._shifted_walls(np.asarray(crop, float), flat, clip, clip0, top - lo, at, near)
+            w, share, misfit = self._shifted_walls(np.asarray(crop, float), flat, clip, clip0, top - lo, at, near)
         return replace(w, top_row=w.top_row + lo, base_row=w.base_row + lo, left=w.left + c0,
-                       right=w.right + c1), dx, dy, share
+                       right=w.right + c1), dx, dy, share, misfit
 
     def _shifted_walls(self, crop, flat, clip, clip0, top, at, near):
         """The walls of a frame with more light clipped than the first frame (:data:`_CLIP_GROWTH`) over most
         of their rows (:meth:`_walls`), read by matching the first frame's profile across each wall over the
-        pixels this frame recorded; and the larger
-        share, over the two walls, of the pixels within 3 px of a wall left out as clipped.
+        pixels this frame recorded; the larger share, over the two walls, of the pixels within 3 px of a wall
+        left out as clipped; and the larger, over the two walls, of the misfit of the window read over the least
+        of the two windows' (``wall_misfit``: over ``_SHIFT_WORSE``, the frame is flagged).
 
         ``crop``: this frame's walls' crop; ``flat``: the first frame's, the
         drift to the pixel taken off; ``clip``, ``clip0``: their pixels the
@@ -1267,12 +1312,17 @@ class SilhouetteTracer:
         either side; the wider is taken unless its misfit is over
         ``_SHIFT_WORSE`` times the narrower's (the light inside the well
         changed otherwise than by the gain and offset fitted) or its line is
-        not straight.
+        not straight.  A window taken though its misfit is over
+        ``_SHIFT_WORSE`` times the other's (the narrower's line not
+        straight) is a read neither window gives: the frame is flagged
+        (``wall_misfit``; found blind on drawn_20261207_100, its exposure up
+        29 %: the wall's own window's bands 1-2 px apart, the wider's misfit
+        8.7x, the rim 0.85 px in, ok).
         """
         base = top + self.l0
         rows = _strip_rows(base, self.depth, crop.shape[0])
         bad = np.zeros(flat.shape, bool) if clip0 is None else clip0
-        cols, rms, shares = [], [], []
+        cols, rms, shares, worse = [], [], [], []
         for side, (j0, jn) in enumerate(zip(at, near, strict=True)):
             reads = []  # (misfit, column, scatter, near_clip): the wall's own neighbourhood, then the wider window
             for inside in (_SHIFT_INSIDE, _SHIFT_HALF):  # (outside is left of the left wall)
@@ -1291,15 +1341,17 @@ class SilhouetteTracer:
             held = [r for r in reads if r[2] <= MAX_WALL_RMS]
             if len(held) == 2:  # (the wider window unless its misfit shows the light inside the well changed)
                 held = held[:1] if held[1][0] > _SHIFT_WORSE * held[0][0] else held[1:]
-            _, col, scatter, near_clip = (held or reads)[-1]
+            taken, col, scatter, near_clip = (held or reads)[-1]
             shares.append(float(np.mean(np.concatenate(near_clip))) if near_clip else 1.0)
             cols.append(col)
             rms.append(scatter)
+            worse.append(taken / min(r[0] for r in reads) if taken > 0.0 else 1.0)
         if max(rms) > MAX_WALL_RMS:  # (as find_walls: not straight walls)
             raise ChamberNotFound(f"the walls read in light the camera clipped are not straight lines (row "
                                   f"scatter {max(rms):.2f} px > {MAX_WALL_RMS} px): too little of their profile "
                                   f"was recorded (lower the exposure)")
-        return SilhouetteWalls(float(top), float(base), cols[0], cols[1], max(rms)), max(shares)
+        return (SilhouetteWalls(float(top), float(base), cols[0], cols[1], max(rms)), max(shares),
+                float(max(worse)))
 
     def _light_change(self, crop, flat, rows, moved, light):
         """How much brighter this frame's light is than the first frame's over the walls' ``crop`` (``flat``: the
@@ -1363,7 +1415,7 @@ class SilhouetteTracer:
         frame = native_frame(frame)  # (no copy when it is already the kernels' kind)
         img = raw = np.rot90(frame, self.k)  # (a view: only the crops the walls are read on are copied)
         out = FrameTrace(index=index)
-        rows_p, cols_p, level = _profiles(img[slice(*self._reg_rows)])
+        rows_p, cols_p, level = self._reg_profiles(img)
         gain = level / self._reg_level if self._reg_level > 0 else 1.0
         if gain > 0.0 and abs(gain - 1.0) > _GAIN_TOL:  # (the light changed since the first frame: read in its
             # light; a black frame is left as it is)
@@ -1371,7 +1423,7 @@ class SilhouetteTracer:
             img = np.rot90(frame, self.k)
         out.figures["light_gain"] = float(gain)
         try:
-            w, dx, dy, out.figures["clipped_share"] = self._walls(img, rows_p, cols_p, raw)
+            w, dx, dy, out.figures["clipped_share"], out.figures["wall_misfit"] = self._walls(img, rows_p, cols_p, raw)
         except ChamberNotFound as err:
             out.message = f"chamber walls not found: {err}"
             out.flag, out.flag_figure, out.flag_value = "no_membrane", "wall_rms", np.nan
@@ -2078,7 +2130,14 @@ class SilhouetteTracer:
         out.figures.update({"residual_rms": float(resid), "film_thickness": float(np.min(lthick)),
                             "volume_disagreement": float(abs(m.volume_left - m.volume_right) /
                                                          max(abs(m.volume), floor))})
+        carried = self._still_touching(out.figures, m.volume)
         out.flag, out.flag_figure, out.flag_value = self._flag(out.figures)
+        if out.flag_figure == "neighbour_gap":
+            self._touched = (out.index, out.flag_value, m.volume)
+            if carried is not None:
+                out.message = (f"the domes came within {carried[1]:.1f} px in frame {carried[0]} and this dome has "
+                               f"grown since: growing domes do not part (the gap measured here: {carried[2]:.1f} "
+                               f"px, a neighbour's face met and taken for the water's edge)")
         if out.flag_figure == "field_margin":
             out.message = field_edge_message(out.flag_value)
             if self._side_seen is not None:  # (a neighbour's dome met: the trace runs on along it)
@@ -2103,6 +2162,29 @@ class SilhouetteTracer:
             self._track = self._curves = None
         return out
 
+    def _still_touching(self, fig, volume):
+        """After a frame whose dome came within the touching flag of a neighbour's (:attr:`_touched`), this
+        frame's ``neighbour_gap`` in ``fig`` is that frame's gap unless its dome lost more than
+        ``1 - _PARTED_VOLUME`` of that frame's ``volume``: two domes that grow do not part.  Returns ``(frame,
+        gap, measured)`` when the gap was carried so, else None.
+
+        Found blind on drawn_20261207_111 (domes overlapping, the view turned a
+        quarter, 2 um/px): frames 5, 6 and 8 flagged touching, frame 7 read
+        its gap 16 px and ok, its rim in clipped light 0.5 % off (silent).
+        Once the domes overlap the gap is measured from this dome's face to
+        the next face beyond it, the neighbour's far side, and the touching
+        flag rests on the face cut off at the search's limit
+        (:meth:`_cut_at_limit`), which a tenth of a px decides.
+        """
+        if self._touched is None or "neighbour_gap" not in fig:
+            return None
+        index, gap, before = self._touched
+        measured = fig["neighbour_gap"]
+        if not volume >= _PARTED_VOLUME * before or not measured > gap:
+            return None
+        fig["neighbour_gap"] = gap
+        return index, gap, measured
+
     def _flag(self, fig):
         st = self.settings
         fig.setdefault("flat_film", self.film_mismatch)
@@ -2115,6 +2197,7 @@ class SilhouetteTracer:
             ("touching", "neighbour_gap", fig.get("neighbour_gap", np.inf) < st.touching_flag),
             ("delaminated", "rim_contact", fig.get("rim_contact", np.nan) < st.delamination_flag),
             ("fractured", "gap_length", fig.get("gap_length", 0.0) > st.gap_flag),
+            ("poor_fit", "wall_misfit", fig.get("wall_misfit", 1.0) > _SHIFT_WORSE),
             ("poor_fit", "least_bend", fig.get("least_bend", np.nan) < _BEND_FLAG),
             ("poor_fit", "flat_film", self.film_mismatch > max(_FILM_TOL_PX, _FILM_TOL * self.l0)),
             ("poor_fit", "low_dome", fig.get("low_dome", np.inf) < _LOW_DOME_PX),

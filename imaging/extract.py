@@ -57,6 +57,11 @@ _FIGURES = {
                            "clipped than the first (its walls read on the rows no clipped pixel can have moved, or "
                            "with too few of those by matching the first frame's profile across them over the "
                            "pixels recorded); 0 in the others"),
+    "wall_misfit": ("1", "silhouette route, walls matched to the first frame's profile (light clipped over most of "
+                         "their rows): the misfit of the window read over the least of its two windows' (the wall's "
+                         "neighbourhood, and 20 px either side), the larger wall's; over 1.25 the read is flagged "
+                         "(poor_fit): the light inside the well changed and the wall's own window gave no straight "
+                         "line; 1 when read by their half level"),
     "light_tilt": ("1", "silhouette route: how much the light changed across the view since the first frame (the "
                         "range of a plane through the water's change; divided out of a frame whose noise it raised "
                         "by over 25 %)"),

@@ -271,7 +271,7 @@ def test_clipped_walls_are_read_from_their_own_neighbourhood_when_the_wells_ligh
     for seed in range(5):
         first, later, clip = _wall_crops(inside_later, seed)
         assert 0.3 < clip.mean() < 0.45
-        w, share = ft.SilhouetteTracer._shifted_walls(tracer, later, first, clip, None, 0.0, (30.0, 110.0),
+        w, share, _ = ft.SilhouetteTracer._shifted_walls(tracer, later, first, clip, None, 0.0, (30.0, 110.0),
                                                       (30.0, 110.0))
         assert abs(w.left - 29.3) < 0.05 and abs(w.right - 110.7) < 0.05, (seed, w.left, w.right)
         assert w.rms <= MAX_WALL_RMS and 0.05 < share < 0.15
@@ -344,3 +344,21 @@ def test_a_walls_rows_a_clipped_pixel_may_have_moved_are_left_out():
     low = np.minimum(crop, 20000.0)  # (cut below the half level: every crossing clipped)
     with pytest.raises(ChamberNotFound, match="clipped"):
         find_walls(low, 10.0, clipped=crop >= 20000.0, **kw)
+
+
+def test_a_clipped_wall_neither_window_reads_is_flagged():
+    """Found blind on drawn_20261207_100 (2 um/px, its exposure up 29 % by the last frame): a wall's plateau clipped
+    on every row, the light inside the well changed.  Its own window's (``_SHIFT_INSIDE``) bands read 1-2 px apart
+    (not a straight line), so the wider window was taken, whose misfit is several times the own window's: the light
+    it assumes unchanged was not.  That read put the last frame's rim 0.85 px in, lambda_pre 1.2 % off, ok
+    (silent); now flagged (poor_fit, ``wall_misfit``, the taken window's misfit over the least: 8.7)."""
+    name = "drawn_20261207_100"
+    s = render_look(name, [0.0, 4.0], lambda_pre=PRE)
+    a, h, l0 = (s.truth.attrs[k] for k in ("chamber_radius", "chamber_depth", "membrane_thickness"))
+    ds = extract(s.frames, pixel_size=s.truth.attrs["pixel_size"], chamber=Chamber(a, h, l0, 3000.0),
+                 progress=False, frame_interval=600.0)
+    sc = score(s.truth, ds)
+    assert abs(sc["lambda_err"][1]) > 0.003  # (the read is off: the flag is needed)
+    assert list(ds.flag.values) == ["ok", "poor_fit"] and ds.flag_figure.values[1] == "wall_misfit"
+    assert ds.wall_misfit.values[0] == 1.0 and ds.wall_misfit.values[1] > 1.25
+    assert sc["n_silent"] == 0
