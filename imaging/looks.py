@@ -405,8 +405,18 @@ DRAWN_BATCHES = {
     # mended since: the clipped walls read on the rows no clipped pixel can have moved, within 0.13 %).  Looks
     # 112-119, measured once at stop 47 (ccff1a1): 55 of 72 ok, 0 silent, worst 0.45 of the tolerance, rims within
     # 0.27 px; the truth's 12 touching frames flagged (looks 112 and 115 a frame early too); look 117 frames 6-8
-    # dome_contrast (8-bit, stray light growing to 24 % of full scale: the dome's flank in clipped light), false
-    20261207: 120,
+    # dome_contrast (8-bit, stray light growing to 24 % of full scale: the dome's flank in clipped light), false.
+    # Looks 120-135, measured once at stop 48 (df8e9b3, 128 again at d354b9e; a first pass through the benchmark's
+    # nuisances, which then replaced a drawn look's stamp, focus drift, particles and light changes, was measured
+    # again in full): look 132 refused (inverted, 8-bit, dim: the column score's noise floor 0.31 against the walls'
+    # 0.61-0.63, the walls' sides unread and a neighbour's walls the strongest; paired from the floor up, the
+    # chamber's walls are taken, then the well's bottom face inside their wide zones is refused: left); of the other
+    # 135 frames 128 ok, the truth's 6 touching frames flagged, look 127 frame 1 least_bend (false), worst 0.58 of
+    # the tolerance, rims within 0.26 px; 2 SILENT: look 135 frames 6-7 (2 um/px, the liquid diluting: the walls'
+    # zones widened, the rims 0.27 px in from the first frame's, lambda_pre 0.36-0.37 %; look 103's, left).  Look 128
+    # (a scale bar in the base's registration window held the drift: frames 1 and 8 silent, 1.7x and 5.3x the
+    # tolerance; 5 frames falsely fractured) reads 9 of 9 ok since d354b9e (_facetrace._unannotated)
+    20261207: 136,
 }
 
 
