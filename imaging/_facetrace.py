@@ -2168,9 +2168,11 @@ class SilhouetteTracer:
         ``1 - _PARTED_VOLUME`` of that frame's ``volume``: two domes that grow do not part.  Returns ``(frame,
         gap, measured)`` when the gap was carried so, else None.
 
-        Found blind on drawn_20261207_111 (domes overlapping, the view turned a
-        quarter, 2 um/px): frames 5, 6 and 8 flagged touching, frame 7 read
-        its gap 16 px and ok, its rim in clipped light 0.5 % off (silent).
+        Found on drawn_20261207_111 rendered without its drawn focus and light
+        drift and stamp (domes overlapping, the view turned a quarter, 2 um/px;
+        in full it reads touching as the truth): frames 5, 6 and 8 flagged
+        touching, frame 7 read its gap 16 px and ok, its rim in clipped light
+        0.5 % off (silent).
         Once the domes overlap the gap is measured from this dome's face to
         the next face beyond it, the neighbour's far side, and the touching
         flag rests on the face cut off at the search's limit

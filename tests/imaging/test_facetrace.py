@@ -1699,10 +1699,11 @@ def test_a_dome_at_its_search_limit_is_cut_only_if_its_face_goes_on(beyond, cut)
 
 def test_growing_domes_that_touched_do_not_part(monkeypatch):
     """A frame after one whose dome came within the touching flag of a neighbour's keeps that gap while its dome
-    does not shrink by a tenth (:meth:`SilhouetteTracer._still_touching`).  Found blind on drawn_20261207_111: the
-    domes overlapping, frame 7's gap read 16 px (to the neighbour's far face) between frames flagged touching, its
-    rim 0.5 % off, ok.  Here the gap measured in the last frame is made 16 px: touching, saying why; with the rule
-    off, not touching (the test can fail); a dome that lost over a tenth of its volume has parted (collapsed, torn)."""
+    does not shrink by a tenth (:meth:`SilhouetteTracer._still_touching`).  Found on drawn_20261207_111 rendered
+    without its focus and light drift: the domes overlapping, frame 7's gap read 16 px (to the neighbour's far
+    face) between frames flagged touching, its rim 0.5 % off, ok.  Here the gap measured in the last frame is made
+    16 px: touching, saying why; with the rule off, not touching (the test can fail); a dome that lost over a tenth
+    of its volume has parted (collapsed, torn)."""
     from osmobulge.imaging.optics import Optics
     from osmobulge.imaging.synthetic import Nuisances, SceneGeometry, render_series
 
